@@ -1,0 +1,87 @@
+"""``python -m benchmarks NAME [NAME ...]``: run benchmarks, print their tables, save JSON.
+
+Each benchmark is a module ``benchmarks/<name>.py`` with ``run() -> dict``. The dict holds the
+benchmark's figures (flat keys such as ``wall_s``) and optionally ``table``: a list of row dicts
+printed as a table. The whole dict is written to ``benchmarks/results/<name>.json`` together with
+the machine it ran on. ``python -m benchmarks --list`` lists them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import os
+import platform
+import pkgutil
+import sys
+import time
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+RESULTS = Path(__file__).resolve().parent / "results"
+
+
+def available() -> list[str]:
+    here = Path(__file__).resolve().parent
+    return sorted(m.name for m in pkgutil.iter_modules([str(here)]) if not m.name.startswith("_"))
+
+
+def format_table(rows: list[dict[str, Any]]) -> str:
+    if not rows:
+        return ""
+    cols = list(dict.fromkeys(k for r in rows for k in r))
+
+    def fmt(v: Any) -> str:
+        if isinstance(v, float):
+            return f"{v:.4g}"
+        return str(v)
+
+    cells = [[fmt(r.get(c, "")) for c in cols] for r in rows]
+    widths = [max(len(c), *(len(row[i]) for row in cells)) for i, c in enumerate(cols)]
+    lines = ["  ".join(c.ljust(w) for c, w in zip(cols, widths, strict=True))]
+    lines.append("  ".join("-" * w for w in widths))
+    lines += ["  ".join(v.ljust(w) for v, w in zip(row, widths, strict=True)) for row in cells]
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m benchmarks")
+    parser.add_argument("names", nargs="*", help="benchmarks to run")
+    parser.add_argument("--list", action="store_true", help="list the benchmarks")
+    args = parser.parse_args(argv)
+    names = available()
+    if args.list or not args.names:
+        print("benchmarks: " + ", ".join(names))
+        return 0 if args.list else 2
+    RESULTS.mkdir(exist_ok=True)
+    for name in args.names:
+        if name not in names:
+            print(f"unknown benchmark {name!r}; choose from {', '.join(names)}", file=sys.stderr)
+            return 2
+        module = importlib.import_module(f"benchmarks.{name}")
+        t0 = time.perf_counter()
+        result: dict[str, Any] = module.run()
+        result.setdefault("benchmark", name)
+        result["total_s"] = time.perf_counter() - t0
+        result["machine"] = {
+            "python": platform.python_version(),
+            "processor": platform.processor() or platform.machine(),
+            "cpus": os.cpu_count(),
+            "date": datetime.now(UTC).isoformat(timespec="seconds"),
+        }
+        print(f"== {name}")
+        if result.get("table"):
+            print(format_table(result["table"]))
+        for key, value in result.items():
+            if key not in ("table", "machine") and not isinstance(value, dict | list):
+                print(f"{key}: {value:.4g}" if isinstance(value, float) else f"{key}: {value}")
+        out = RESULTS / f"{name}.json"
+        out.write_text(json.dumps(result, indent=2, default=str) + "\n")
+        print(f"written {out.relative_to(Path.cwd()) if out.is_relative_to(Path.cwd()) else out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,3 @@
+from daq.cli.biafc import main
+
+raise SystemExit(main())

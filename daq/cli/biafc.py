@@ -1,0 +1,68 @@
+"""``biafc``: the command-line entry point; each subcommand lives in its own module.
+
+A subcommand module ``daq/cli/<name>.py`` defines ``add_arguments(parser)`` and
+``run(args) -> int``. Modules are imported only when their subcommand runs, so ``biafc bands``
+does not pay for Qt or matplotlib.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+
+#: subcommand -> (module under daq.cli, one-line help)
+SUBCOMMANDS: dict[str, tuple[str, str]] = {
+    "bands": ("bands", "per-cylinder quasi-band edges of a chain"),
+    "simulate": ("simulate", "one DEM run written as a run file"),
+    "accuracy": ("accuracy", "error against run time of the integrators"),
+    "stability": ("stability", "stiff and extreme cases, each with a verdict"),
+    "figures": ("figures", "the paper's figures from a run file"),
+    "gui": ("gui", "the bench window"),
+}
+
+
+class CliError(Exception):
+    """A user error reported as one line (exit status 2)."""
+
+
+def _load(name: str):  # type: ignore[no-untyped-def]
+    module_name, _ = SUBCOMMANDS[name]
+    return importlib.import_module(f"daq.cli.{module_name}")
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser = argparse.ArgumentParser(
+        prog="biafc", description="biafc-lab: bench software for BiAFC experiments"
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name, (_, help_text) in SUBCOMMANDS.items():
+        sub.add_parser(name, help=help_text, add_help=False)
+    if not argv or argv[0] in ("-h", "--help"):
+        parser.print_help()
+        return 0 if argv else 2
+    name = argv[0]
+    if name not in SUBCOMMANDS:
+        parser.error(f"unknown command {name!r} (choose from {', '.join(SUBCOMMANDS)})")
+    try:
+        module = _load(name)
+    except ModuleNotFoundError as exc:
+        print(f"biafc {name}: not available in this installation ({exc})", file=sys.stderr)
+        return 2
+    sub_parser = argparse.ArgumentParser(prog=f"biafc {name}", description=SUBCOMMANDS[name][1])
+    module.add_arguments(sub_parser)
+    args = sub_parser.parse_args(argv[1:])
+    try:
+        return int(module.run(args) or 0)
+    except CliError as exc:
+        print(f"biafc {name}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"biafc {name}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

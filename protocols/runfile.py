@@ -1,0 +1,440 @@
+"""The run file (HDF5), format_version 1: its layout, its writer and its reader, in one place.
+
+Every part of biafc-lab that touches a run file (the run engine, ``biafc simulate``, the
+simulated bench, the analysis and the GUI) goes through this module, so the layout lives here
+and nowhere else. Layout (see the design notes)::
+
+    /                 attrs: format="biafc-run", format_version=1, created, software_version,
+                             backend ("sim"|"hardware"|"dem"), status, protocol_yaml, bench_yaml
+    /snapshot         attr json: every instrument's snapshot() at start
+    /chain            lengths_m [N], onset_Hz [N, B], cutoff_Hz [N, B];
+                      attrs diameter_m, f0_N, beta_c
+    /scan/<direction> NXdata (signal=velocity, axes=[amplitudes, cylinders, time]);
+                      attrs f_center_Hz, cycles (or width_s), averages
+        amplitudes    [A] float64, attr units
+        cylinders     [C] int32, 1-based
+        time          [S] float64, s from the trigger
+        velocity      [A, C, S] float32, m/s, mean over averages; NaN until measured
+        drive         [A, C, S] float32, V (sim/dem: the applied drive in its own unit, attr units)
+        done          [A, C] uint8: 0 pending, 1 measured and flushed, 2 failed
+        measured_at   [A, C] float64, unix time (NaN until measured)
+    /log              (time, level, message) rows, resizable
+    /simulation       (optional) attrs: integrator, step, error indicators of a DEM run
+
+Writing uses SWMR and flushes after every point, so a crash loses at most the point in flight
+and a reader can follow a run live. HDF5 forbids changing attributes under SWMR, so the final
+``status`` is written when the writer closes (re-opening the file without SWMR).
+"""
+
+from __future__ import annotations
+
+import json
+import socket
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from importlib.metadata import PackageNotFoundError, version
+from pathlib import Path
+from typing import Any, Literal
+
+import h5py
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = [
+    "DIRECTIONS",
+    "FORMAT",
+    "FORMAT_VERSION",
+    "PointState",
+    "ChainInfo",
+    "RunData",
+    "RunFileError",
+    "RunFileWriter",
+    "ScanData",
+    "ScanSpec",
+    "read_run",
+    "software_version",
+]
+
+FORMAT = "biafc-run"
+FORMAT_VERSION = 1
+DIRECTIONS = ("ltr", "rtl")
+Backend = Literal["sim", "hardware", "dem"]
+Status = Literal["running", "complete", "aborted", "failed"]
+STATUSES = ("running", "complete", "aborted", "failed")
+
+
+class PointState:
+    """Values of the ``done`` dataset."""
+
+    PENDING = 0
+    DONE = 1
+    FAILED = 2
+
+
+class RunFileError(ValueError):
+    """The file is not a biafc run file, or not one this version reads."""
+
+
+def software_version() -> str:
+    """Installed version of biafc-lab (``"unknown"`` when run from a bare checkout)."""
+    try:
+        return version("biafc-lab")
+    except PackageNotFoundError:
+        return "unknown"
+
+
+@dataclass(frozen=True)
+class ChainInfo:
+    """The model's view of the chain stored in every run file.
+
+    Shapes: ``lengths_m [N]``, ``onset_Hz [N, B]``, ``cutoff_Hz [N, B]``.
+    """
+
+    lengths_m: NDArray[np.float64]
+    diameter_m: float
+    f0_N: float
+    beta_c: float
+    onset_Hz: NDArray[np.float64]
+    cutoff_Hz: NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class ScanSpec:
+    """Shape and axes of one direction's scan, fixed when the file is created."""
+
+    direction: str
+    amplitudes: NDArray[np.float64]
+    amplitude_units: str
+    cylinders: NDArray[np.int32]
+    time_s: NDArray[np.float64]
+    f_center_Hz: float
+    cycles: float | None = None
+    width_s: float | None = None
+    averages: int = 1
+    drive_units: str = "V"
+
+
+@dataclass
+class ScanData:
+    """One direction's scan as read. Shapes ``[A]``, ``[C]``, ``[S]``, ``[A, C, S]``, ``[A, C]``."""
+
+    direction: str
+    amplitudes: NDArray[np.float64]
+    amplitude_units: str
+    cylinders: NDArray[np.int32]
+    time_s: NDArray[np.float64]
+    velocity: NDArray[np.float32]
+    drive: NDArray[np.float32]
+    drive_units: str
+    done: NDArray[np.uint8]
+    measured_at: NDArray[np.float64]
+    f_center_Hz: float
+    cycles: float | None
+    width_s: float | None
+    averages: int
+
+    @property
+    def sample_rate_Hz(self) -> float:
+        return float(1.0 / np.median(np.diff(self.time_s)))
+
+    def is_done(self) -> NDArray[np.bool_]:
+        return self.done == PointState.DONE
+
+
+@dataclass
+class RunData:
+    """A whole run file in memory."""
+
+    path: Path
+    attrs: dict[str, Any]
+    snapshot: dict[str, Any]
+    chain: ChainInfo
+    scans: dict[str, ScanData]
+    log: list[tuple[float, str, str]] = field(default_factory=list)
+    simulation: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def status(self) -> str:
+        return str(self.attrs.get("status", ""))
+
+    @property
+    def backend(self) -> str:
+        return str(self.attrs.get("backend", ""))
+
+
+_LOG_DTYPE = np.dtype(
+    [
+        ("time", np.float64),
+        ("level", h5py.string_dtype("utf-8")),
+        ("message", h5py.string_dtype("utf-8")),
+    ]
+)
+
+
+def _now_iso() -> str:
+    return datetime.now(UTC).isoformat(timespec="seconds")
+
+
+class RunFileWriter:
+    """Creates or re-opens a run file and writes points into it, flushed one by one.
+
+    Use :meth:`create` for a new run and :meth:`open_existing` to resume. Call :meth:`close`
+    with the final status; a writer that is never closed (crash, SIGKILL) leaves a readable
+    file whose status is still ``"running"`` and whose ``done`` flags tell what was measured.
+    """
+
+    def __init__(self, path: Path, handle: h5py.File) -> None:
+        self.path = path
+        self._f = handle
+        self._closed = False
+
+    # -- creation -------------------------------------------------------------------------
+    @classmethod
+    def create(
+        cls,
+        path: str | Path,
+        *,
+        backend: Backend,
+        chain: ChainInfo,
+        scans: Sequence[ScanSpec],
+        protocol_yaml: str = "",
+        bench_yaml: str = "",
+        snapshot: Mapping[str, Any] | None = None,
+        simulation: Mapping[str, Any] | None = None,
+        extra_attrs: Mapping[str, Any] | None = None,
+        swmr: bool = True,
+    ) -> RunFileWriter:
+        """Create ``path`` (refused if it exists) with every dataset of the layout.
+
+        Velocity and drive start as NaN, ``done`` as 0. ``simulation`` (optional) becomes the
+        attributes of ``/simulation``.
+        """
+        path = Path(path)
+        if path.exists():
+            raise FileExistsError(f"run file {path} exists already (use --resume to continue it)")
+        f = h5py.File(path, "w", libver="latest")
+        try:
+            f.attrs["format"] = FORMAT
+            f.attrs["format_version"] = FORMAT_VERSION
+            f.attrs["created"] = _now_iso()
+            f.attrs["software_version"] = software_version()
+            f.attrs["host"] = socket.gethostname()
+            f.attrs["backend"] = backend
+            f.attrs["status"] = "running"
+            f.attrs["started"] = _now_iso()
+            f.attrs["protocol_yaml"] = protocol_yaml
+            f.attrs["bench_yaml"] = bench_yaml
+            for key, value in (extra_attrs or {}).items():
+                f.attrs[key] = value
+            snap = f.create_group("snapshot")
+            snap.attrs["json"] = json.dumps(dict(snapshot or {}), default=str, sort_keys=True)
+            g = f.create_group("chain")
+            g.create_dataset("lengths_m", data=np.asarray(chain.lengths_m, dtype=np.float64))
+            g.create_dataset("onset_Hz", data=np.atleast_2d(np.asarray(chain.onset_Hz, float)))
+            g.create_dataset("cutoff_Hz", data=np.atleast_2d(np.asarray(chain.cutoff_Hz, float)))
+            g.attrs["diameter_m"] = float(chain.diameter_m)
+            g.attrs["f0_N"] = float(chain.f0_N)
+            g.attrs["beta_c"] = float(chain.beta_c)
+            scan_root = f.create_group("scan")
+            for spec in scans:
+                cls._create_scan(scan_root, spec)
+            f.create_dataset("log", shape=(0,), maxshape=(None,), dtype=_LOG_DTYPE, chunks=(64,))
+            if simulation:
+                sim = f.create_group("simulation")
+                for key, value in simulation.items():
+                    sim.attrs[key] = value
+            f.flush()
+            if swmr:
+                f.swmr_mode = True
+        except BaseException:
+            f.close()
+            path.unlink(missing_ok=True)
+            raise
+        return cls(path, f)
+
+    @staticmethod
+    def _create_scan(root: h5py.Group, spec: ScanSpec) -> None:
+        if spec.direction not in DIRECTIONS:
+            raise ValueError(f"direction must be one of {DIRECTIONS}, got {spec.direction!r}")
+        A, C, S = len(spec.amplitudes), len(spec.cylinders), len(spec.time_s)
+        g = root.create_group(spec.direction)
+        g.attrs["NX_class"] = "NXdata"
+        g.attrs["signal"] = "velocity"
+        g.attrs["axes"] = ["amplitudes", "cylinders", "time"]
+        g.attrs["f_center_Hz"] = float(spec.f_center_Hz)
+        g.attrs["cycles"] = float("nan") if spec.cycles is None else float(spec.cycles)
+        g.attrs["width_s"] = float("nan") if spec.width_s is None else float(spec.width_s)
+        g.attrs["averages"] = int(spec.averages)
+        amp = g.create_dataset("amplitudes", data=np.asarray(spec.amplitudes, dtype=np.float64))
+        amp.attrs["units"] = spec.amplitude_units
+        cyl = g.create_dataset("cylinders", data=np.asarray(spec.cylinders, dtype=np.int32))
+        cyl.attrs["units"] = "1-based cylinder number"
+        t = g.create_dataset("time", data=np.asarray(spec.time_s, dtype=np.float64))
+        t.attrs["units"] = "s"
+        chunks = (1, 1, S)
+        v = g.create_dataset(
+            "velocity", shape=(A, C, S), dtype=np.float32, fillvalue=np.nan, chunks=chunks
+        )
+        v.attrs["units"] = "m/s"
+        d = g.create_dataset(
+            "drive", shape=(A, C, S), dtype=np.float32, fillvalue=np.nan, chunks=chunks
+        )
+        d.attrs["units"] = spec.drive_units
+        g.create_dataset("done", shape=(A, C), dtype=np.uint8, fillvalue=0)
+        m = g.create_dataset("measured_at", shape=(A, C), dtype=np.float64, fillvalue=np.nan)
+        m.attrs["units"] = "s since the unix epoch"
+
+    @classmethod
+    def open_existing(cls, path: str | Path, *, swmr: bool = True) -> RunFileWriter:
+        """Re-open an interrupted run file to append points (``--resume``)."""
+        path = Path(path)
+        _check_format(path)
+        f = h5py.File(path, "r+", libver="latest")
+        f.attrs["status"] = "running"
+        f.attrs["resumed"] = _now_iso()
+        f.flush()
+        if swmr:
+            f.swmr_mode = True
+        return cls(path, f)
+
+    # -- writing --------------------------------------------------------------------------
+    def write_point(
+        self,
+        direction: str,
+        amplitude_index: int,
+        cylinder_index: int,
+        velocity: NDArray[np.floating[Any]],
+        drive: NDArray[np.floating[Any]],
+        measured_at: float | None = None,
+    ) -> None:
+        """Store one point (0-based indices), mark it done and flush. Shapes ``[S]``."""
+        g = self._f["scan"][direction]
+        g["velocity"][amplitude_index, cylinder_index, :] = np.asarray(velocity, np.float32)
+        g["drive"][amplitude_index, cylinder_index, :] = np.asarray(drive, np.float32)
+        g["measured_at"][amplitude_index, cylinder_index] = (
+            time.time() if measured_at is None else measured_at
+        )
+        g["done"][amplitude_index, cylinder_index] = PointState.DONE
+        self._f.flush()
+
+    def mark_failed(self, direction: str, amplitude_index: int, cylinder_index: int) -> None:
+        """Mark a point that failed after its retries (``done`` = 2) and flush."""
+        self._f["scan"][direction]["done"][amplitude_index, cylinder_index] = PointState.FAILED
+        self._f.flush()
+
+    def done_mask(self, direction: str) -> NDArray[np.uint8]:
+        """The ``done`` array ``[A, C]`` of one direction."""
+        return np.asarray(self._f["scan"][direction]["done"][...])
+
+    def log(self, level: str, message: str, when: float | None = None) -> None:
+        """Append a row to ``/log`` and flush."""
+        ds = self._f["log"]
+        n = ds.shape[0]
+        ds.resize((n + 1,))
+        row = np.zeros(1, dtype=_LOG_DTYPE)
+        row[0] = (time.time() if when is None else when, level, message)
+        ds[n] = row[0]
+        self._f.flush()
+
+    def close(self, status: Status) -> None:
+        """Close, writing the final ``status`` (and ``finished`` time) as root attributes."""
+        if self._closed:
+            return
+        if status not in STATUSES:
+            raise ValueError(f"status must be one of {STATUSES}, got {status!r}")
+        self._f.flush()
+        self._f.close()
+        self._closed = True
+        with h5py.File(self.path, "r+", libver="latest") as f:
+            f.attrs["status"] = status
+            f.attrs["finished"] = _now_iso()
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+
+def _check_format(path: Path) -> None:
+    if not path.exists():
+        raise FileNotFoundError(f"run file {path} does not exist")
+    try:
+        with h5py.File(path, "r", swmr=True) as f:
+            fmt = f.attrs.get("format")
+            ver = f.attrs.get("format_version")
+    except OSError as exc:
+        raise RunFileError(f"{path} is not a readable HDF5 file ({exc})") from exc
+    if fmt != FORMAT:
+        raise RunFileError(f"{path} is not a biafc run file (format={fmt!r})")
+    if int(ver) != FORMAT_VERSION:
+        raise RunFileError(f"{path} has format_version {ver}; this software reads {FORMAT_VERSION}")
+
+
+def _attr_dict(obj: h5py.HLObject) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, value in obj.attrs.items():
+        if isinstance(value, bytes):
+            value = value.decode()
+        elif isinstance(value, np.generic):
+            value = value.item()
+        out[key] = value
+    return out
+
+
+def _opt(value: Any) -> float | None:
+    v = float(value)
+    return None if np.isnan(v) else v
+
+
+def read_run(path: str | Path) -> RunData:
+    """Read a whole run file (also one still being written, through SWMR)."""
+    path = Path(path)
+    _check_format(path)
+    with h5py.File(path, "r", swmr=True) as f:
+        attrs = _attr_dict(f)
+        snapshot = json.loads(f["snapshot"].attrs.get("json", "{}"))
+        c = f["chain"]
+        chain = ChainInfo(
+            lengths_m=c["lengths_m"][...],
+            diameter_m=float(c.attrs["diameter_m"]),
+            f0_N=float(c.attrs["f0_N"]),
+            beta_c=float(c.attrs["beta_c"]),
+            onset_Hz=c["onset_Hz"][...],
+            cutoff_Hz=c["cutoff_Hz"][...],
+        )
+        scans: dict[str, ScanData] = {}
+        for direction in DIRECTIONS:
+            if direction not in f["scan"]:
+                continue
+            g = f["scan"][direction]
+            for name in ("velocity", "drive", "done", "measured_at"):
+                g[name].refresh()
+            scans[direction] = ScanData(
+                direction=direction,
+                amplitudes=g["amplitudes"][...],
+                amplitude_units=str(g["amplitudes"].attrs.get("units", "")),
+                cylinders=g["cylinders"][...],
+                time_s=g["time"][...],
+                velocity=g["velocity"][...],
+                drive=g["drive"][...],
+                drive_units=str(g["drive"].attrs.get("units", "")),
+                done=g["done"][...],
+                measured_at=g["measured_at"][...],
+                f_center_Hz=float(g.attrs["f_center_Hz"]),
+                cycles=_opt(g.attrs.get("cycles", np.nan)),
+                width_s=_opt(g.attrs.get("width_s", np.nan)),
+                averages=int(g.attrs.get("averages", 1)),
+            )
+        log_ds = f["log"]
+        log_ds.refresh()
+        log = [
+            (
+                float(r["time"]),
+                r["level"].decode() if isinstance(r["level"], bytes) else str(r["level"]),
+                r["message"].decode() if isinstance(r["message"], bytes) else str(r["message"]),
+            )
+            for r in log_ds[...]
+        ]
+        simulation = _attr_dict(f["simulation"]) if "simulation" in f else {}
+    return RunData(path, attrs, snapshot, chain, scans, log, simulation)
