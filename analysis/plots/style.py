@@ -1,0 +1,129 @@
+"""Shared look of the figures and how they are saved (PNG and PDF).
+
+Figures are ``matplotlib.figure.Figure`` objects drawn without pyplot, so no backend is chosen
+or changed (the GUI's Qt backend is left alone) and no figure is kept in a global registry.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from contextlib import AbstractContextManager
+from pathlib import Path
+from typing import Any, cast
+
+import matplotlib
+import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.colors import Colormap
+from matplotlib.figure import Figure
+from matplotlib.patches import Patch, Rectangle
+from numpy.typing import NDArray
+
+from analysis.display import amplitude_label, amplitude_scale
+
+__all__ = [
+    "FORMATS",
+    "GAP_LABEL",
+    "RC",
+    "add_gap_background",
+    "amplitude_label",
+    "amplitude_scale",
+    "cell_edges",
+    "gap_legend_handle",
+    "masked_cmap",
+    "new_figure",
+    "save_figure",
+    "style",
+]
+
+#: formats every figure is written in
+FORMATS: tuple[str, ...] = ("png", "pdf")
+#: legend text of the hatched "not measured" background
+GAP_LABEL = "not measured"
+
+RC: dict[str, Any] = {
+    "font.size": 11,
+    "axes.titlesize": 11,
+    "axes.labelsize": 11,
+    "xtick.labelsize": 10,
+    "ytick.labelsize": 10,
+    "legend.fontsize": 9,
+    "figure.dpi": 100,
+    "savefig.dpi": 150,
+    "axes.grid": False,
+    "image.cmap": "viridis",
+}
+
+
+def new_figure(
+    nrows: int = 1,
+    ncols: int = 1,
+    *,
+    figsize: tuple[float, float] = (7.0, 4.5),
+    **kwargs: Any,
+) -> tuple[Figure, NDArray[Any]]:
+    """A figure (not attached to pyplot's state) and its axes as a 2-D array ``[nrows, ncols]``.
+
+    Call inside :func:`style` so that fonts and sizes apply.
+    """
+    fig = Figure(figsize=figsize, layout="constrained")
+    axes = fig.subplots(nrows, ncols, squeeze=False, **kwargs)
+    return fig, axes
+
+
+def style() -> AbstractContextManager[None]:
+    """Context in which a figure is drawn: the shared fonts and sizes (``RC``)."""
+    return matplotlib.rc_context(cast(Any, RC))
+
+
+def save_figure(fig: Figure, out_dir: str | Path, name: str) -> list[Path]:
+    """Write ``fig`` as ``out_dir/name.png`` and ``.pdf``; returns the paths."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = []
+    with matplotlib.rc_context(cast(Any, RC)):
+        for fmt in FORMATS:
+            p = out / f"{name}.{fmt}"
+            fig.savefig(p, dpi=RC["savefig.dpi"])
+            paths.append(p)
+    return paths
+
+
+def masked_cmap(name: str = "viridis") -> Colormap:
+    """A colormap whose NaN ("bad") colour is transparent, so the gap background shows."""
+    return matplotlib.colormaps[name].with_extremes(bad=(0.0, 0.0, 0.0, 0.0))
+
+
+def add_gap_background(ax: Axes) -> None:
+    """Grey hatched background: wherever nothing is drawn (NaN, unmeasured), it shows."""
+    ax.add_patch(
+        Rectangle(
+            (0, 0),
+            1,
+            1,
+            transform=ax.transAxes,
+            facecolor="0.88",
+            edgecolor="0.6",
+            hatch="//",
+            linewidth=0,
+            zorder=-10,
+        )
+    )
+
+
+def gap_legend_handle() -> Patch:
+    """Legend entry for the hatched background."""
+    return Patch(facecolor="0.88", edgecolor="0.6", hatch="//", label=GAP_LABEL)
+
+
+def cell_edges(centres: Sequence[float] | NDArray[Any], log: bool = False) -> NDArray[np.float64]:
+    """Cell edges ``[n + 1]`` around ``centres [n]`` (geometric midpoints when ``log``)."""
+    c = np.asarray(centres, dtype=np.float64)
+    if c.size == 1:
+        return np.array([c[0] * 0.9, c[0] * 1.1]) if log else np.array([c[0] - 0.5, c[0] + 0.5])
+    if log:
+        lc = np.log(c)
+        mid = 0.5 * (lc[1:] + lc[:-1])
+        return np.exp(np.concatenate([[2 * lc[0] - mid[0]], mid, [2 * lc[-1] - mid[-1]]]))
+    mid = 0.5 * (c[1:] + c[:-1])
+    return np.concatenate([[2 * c[0] - mid[0]], mid, [2 * c[-1] - mid[-1]]])

@@ -1,0 +1,198 @@
+"""``run_protocol PROTOCOL.yaml [--bench BENCH.yaml] [--out RUN.h5] [--resume RUN.h5] [--dry-run]``
+
+Runs a protocol on a bench (default: the shipped simulated bench) into an HDF5 run file.
+Everything is checked before an instrument moves; a bad input is one line on stderr, exit 2.
+Exit 0 on a complete run; 1 when the run ended aborted or failed (the reason on one line);
+130 after Ctrl-C. Progress: a bar with ETA on a terminal, plain lines when piped.
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from types import FrameType
+from typing import Any, TextIO
+
+from daq.cli.biafc import CliError
+
+__all__ = ["add_arguments", "main", "run"]
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("protocol", type=Path, help="protocol file (YAML)")
+    parser.add_argument(
+        "--bench", type=Path, default=None, help="bench file (default: the simulated bench)"
+    )
+    parser.add_argument("--out", type=Path, default=None, help="run file to write (HDF5)")
+    parser.add_argument(
+        "--resume", type=Path, default=None, metavar="RUN.h5", help="continue an interrupted run"
+    )
+    parser.add_argument(
+        "--dry-run", action="store_true", help="validate, print point count and ETA, run nothing"
+    )
+    parser.add_argument("--seed", type=int, default=None, help="seed of the simulated bench")
+    parser.add_argument("--quiet", action="store_true", help="no progress output")
+
+
+def _fmt_s(s: float) -> str:
+    s = max(0.0, s)
+    h, rem = divmod(round(s), 3600)
+    m, sec = divmod(rem, 60)
+    return f"{h}:{m:02d}:{sec:02d}" if h else f"{m:02d}:{sec:02d}"
+
+
+def _fmt_amplitude(value: float, units: str) -> str:
+    from instruments.units import format_quantity
+
+    if units == "m":
+        return format_quantity(value, "length", digits=3)
+    return f"{value:.3g} Vpp" if units == "V" else f"{value:.3g} {units}"
+
+
+class Progress:
+    """Prints engine events: a one-line bar on a TTY, plain lines otherwise."""
+
+    def __init__(self, stream: TextIO, quiet: bool = False) -> None:
+        self.stream = stream
+        self.tty = stream.isatty()
+        self.quiet = quiet
+        self._last_plain = 0.0
+
+    def __call__(self, event: Any) -> None:
+        from daq.engine import EventKind
+
+        if self.quiet:
+            return
+        k, d = event.kind, event.data
+        if k == EventKind.PROGRESS:
+            amp = _fmt_amplitude(float(d["amplitude"]), str(d["amplitude_units"]))
+            where = f"{d['direction']} {amp} cyl {d['cylinder']:2d}"
+            if self.tty:
+                width = 30
+                fill = int(width * d["done"] / max(d["total"], 1))
+                bar = "#" * fill + "-" * (width - fill)
+                self.stream.write(
+                    f"\r[{bar}] {d['done']}/{d['total']} {where} ETA {_fmt_s(d['eta_s'])}  "
+                )
+                self.stream.flush()
+            else:
+                now = time.monotonic()
+                if d["done"] == d["total"] or now - self._last_plain >= 1.0:
+                    self._last_plain = now
+                    print(
+                        f"point {d['done']}/{d['total']}: {where}, ETA {_fmt_s(d['eta_s'])}",
+                        file=self.stream,
+                        flush=True,
+                    )
+        elif k == EventKind.WARNING:
+            if self.tty:
+                self.stream.write("\n")
+            print(f"warning: {event.message}", file=self.stream, flush=True)
+        elif k == EventKind.RUN_STARTED:
+            print(
+                f"run {d['path']}: {d['n_todo']} of {d['n_points']} points to measure "
+                f"(estimated {_fmt_s(d['estimated_s'])})",
+                file=self.stream,
+                flush=True,
+            )
+        elif k == EventKind.FINISHED and self.tty:
+            self.stream.write("\n")
+
+
+def _load(args: argparse.Namespace) -> tuple[Any, Any, Any]:
+    from daq.engine import make_plan
+    from protocols.bench import load_bench
+    from protocols.schema import load_protocol
+    from protocols.yamlfile import ConfigError
+
+    try:
+        pf = load_protocol(args.protocol)
+        bf = load_bench(args.bench)
+        plan = make_plan(pf, bf)
+    except ConfigError as exc:
+        raise CliError(str(exc)) from None
+    return pf, bf, plan
+
+
+def run(args: argparse.Namespace) -> int:
+    from daq.store import StoreError, check_output_path, stored_seed
+
+    if args.seed is not None and args.seed < 0:
+        raise CliError("--seed: must be >= 0")
+    if args.resume is not None and args.out is not None and args.out != args.resume:
+        raise CliError("--out and --resume name different files; give one")
+    pf, bf, plan = _load(args)
+    resume = args.resume is not None
+    out: Path = args.resume if resume else (args.out or pf.protocol.output_path())
+    try:
+        check_output_path(out, resume=resume)
+    except StoreError as exc:
+        raise CliError(str(exc)) from None
+    if args.dry_run:
+        print(
+            f"protocol {pf.protocol.name!r} on {bf.bench.name!r}: {plan.n_points} points, "
+            f"estimated {_fmt_s(plan.estimated_s)} ({plan.estimated_s:.1f} s); "
+            f"output {out}"
+        )
+        return 0
+    seed = args.seed
+    if resume and seed is None:
+        seed = stored_seed(out)
+    if seed is None and bf.bench.simulation is not None:
+        seed = bf.bench.simulation.seed
+    return _execute(pf, bf, out, resume, seed, args.quiet)
+
+
+def _execute(pf: Any, bf: Any, out: Path, resume: bool, seed: int | None, quiet: bool) -> int:
+    from daq.bench_assembly import assemble
+    from daq.engine import RunEngine
+    from instruments.errors import InstrumentError
+    from protocols.yamlfile import ConfigError
+
+    try:
+        instruments = assemble(bf, seed=seed)
+    except (ConfigError, InstrumentError) as exc:
+        raise CliError(str(exc).splitlines()[0]) from None
+    engine = RunEngine(pf, bf, instruments, out, resume=resume, seed=seed)
+    engine.subscribe(Progress(sys.stdout, quiet))
+    interrupted: list[str] = []
+
+    def on_signal(signum: int, frame: FrameType | None) -> None:
+        name = signal.Signals(signum).name
+        interrupted.append(name)
+        engine.abort(f"interrupted by {name}")
+
+    old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        result = engine.run()
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+        instruments.close()
+    if result.status == "complete":
+        failed = f", {result.n_failed} failed point(s) marked" if result.n_failed else ""
+        print(f"complete: {result.n_done} points in {result.wall_s:.1f} s{failed} -> {out}")
+        return 0
+    print(f"run_protocol: run {result.status}: {result.reason} (file {out})", file=sys.stderr)
+    return 130 if interrupted and "SIGINT" in interrupted else 1
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="run_protocol", description="Run a measurement protocol into an HDF5 run file."
+    )
+    add_arguments(parser)
+    args = parser.parse_args(argv)
+    try:
+        return run(args)
+    except CliError as exc:
+        print(f"run_protocol: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,531 @@
+"""The run engine: one state machine that runs a protocol on a bench and writes a run file.
+
+States: idle -> running <-> paused -> complete | aborted | failed. :meth:`RunEngine.pause`,
+:meth:`RunEngine.resume` and :meth:`RunEngine.abort` are thread-safe and may be called from any
+thread (a GUI, a signal handler). Pause and abort act at the next point boundary; abort also
+interrupts waits (settling, pause). Whatever ends the run (completion, abort, an instrument
+fault, an exception, SIGINT/SIGTERM through the CLI), every instrument is put in its safe state
+(generator outputs off, stage stopped) and the outcome is logged in the file.
+
+Per point: move the stage, settle, check the vibrometer signal level, then ``averages`` times:
+arm the digitiser, trigger the generator, read, check (NaN, clipping; a trigger timeout raises).
+A failed attempt is retried up to ``retries`` times; a point that still fails is marked FAILED
+and the run continues or stops per ``on_point_failure``. Velocity is stored in m/s (volts times
+the vibrometer's sensitivity), shifted by the decoder's signal delay so it lines up with the
+drive.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from daq.engine.events import EventBus, EventKind, RunEvent, RunState, Subscriber
+from daq.engine.instruments import BenchInstruments
+from daq.engine.plan import Plan, Point, make_plan
+from daq.store import create_run, resume_run
+from instruments.errors import InstrumentError, InstrumentTimeout, SignalLostError
+from instruments.interfaces import AcquisitionConfig, BurstConfig
+from protocols.bench import BenchFile
+from protocols.runfile import PointState, RunFileWriter, ScanSpec
+from protocols.schema import ProtocolFile
+
+__all__ = ["PointCheckError", "RunEngine", "RunResult"]
+
+#: a record is "clipped" when |V| reaches this fraction of the input range
+CLIP_FRACTION = 0.995
+
+
+class PointCheckError(InstrumentError):
+    """A record failed its checks (NaN, clipping, low signal): the point is retried."""
+
+
+class _Aborted(Exception):
+    pass
+
+
+@dataclass(frozen=True)
+class RunResult:
+    """How a run ended."""
+
+    status: str  # "complete" | "aborted" | "failed"
+    reason: str
+    path: Path
+    n_done: int
+    n_failed: int
+    wall_s: float
+
+
+class RunEngine:
+    """Runs one protocol on one bench into one run file.
+
+    Parameters
+    ----------
+    protocol, bench:
+        The validated protocol and bench files (their texts go into the file).
+    instruments:
+        The assembled bench (:func:`daq.bench_assembly.assemble`, or fakes in tests).
+    out_path:
+        The run file to create, or (``resume=True``) the interrupted one to continue.
+    resume:
+        Continue ``out_path``: verify the protocol, skip points already done.
+    seed:
+        Recorded in the file (the simulated bench's noise seed).
+
+    Use :meth:`subscribe` for events, :meth:`run` (blocking) or :meth:`start` (a thread), and
+    :meth:`pause`, :meth:`resume`, :meth:`abort` from any thread.
+    """
+
+    def __init__(
+        self,
+        protocol: ProtocolFile,
+        bench: BenchFile,
+        instruments: BenchInstruments,
+        out_path: str | Path,
+        *,
+        resume: bool = False,
+        seed: int | None = None,
+    ) -> None:
+        self.protocol_file = protocol
+        self.bench_file = bench
+        self.instruments = instruments
+        self.out_path = Path(out_path)
+        self.resume_mode = resume
+        self.seed = seed
+        self.plan: Plan = make_plan(protocol, bench)
+        self._bus = EventBus()
+        self._lock = threading.RLock()
+        self._state = RunState.IDLE
+        self._abort = threading.Event()
+        self._abort_reason = ""
+        self._running = threading.Event()  # set while not paused
+        self._running.set()
+        self._thread: threading.Thread | None = None
+        self._writer: RunFileWriter | None = None
+        self.result: RunResult | None = None
+
+    # -- subscription and controls (thread-safe) -------------------------------------------
+    def subscribe(self, callback: Subscriber) -> Callable[[], None]:
+        """Call ``callback(RunEvent)`` for every event; returns an unsubscribe function."""
+        return self._bus.subscribe(callback)
+
+    @property
+    def state(self) -> RunState:
+        with self._lock:
+            return self._state
+
+    def pause(self) -> None:
+        """Pause at the next point boundary (no effect unless running)."""
+        with self._lock:
+            if self._state == RunState.RUNNING:
+                self._running.clear()
+                self._set_state(RunState.PAUSED)
+
+    def resume(self) -> None:
+        """Continue a paused run."""
+        with self._lock:
+            if self._state == RunState.PAUSED:
+                self._set_state(RunState.RUNNING)
+                self._running.set()
+
+    def abort(self, reason: str = "aborted by the user") -> None:
+        """Stop at the next point boundary (waits are interrupted); safe state follows."""
+        with self._lock:
+            if not self._abort.is_set():
+                self._abort_reason = reason
+            self._abort.set()
+            self._running.set()
+
+    def start(self) -> threading.Thread:
+        """Run in a background thread; returns it (join it, or wait for ``finished``)."""
+        t = threading.Thread(target=self.run, name="biafc-run-engine", daemon=True)
+        self._thread = t
+        t.start()
+        return t
+
+    def wait(self, timeout_s: float | None = None) -> RunResult | None:
+        """Join the thread of :meth:`start`; returns the result (``None`` if still running)."""
+        if self._thread is not None:
+            self._thread.join(timeout_s)
+        return self.result
+
+    # -- internals -------------------------------------------------------------------------
+    def _set_state(self, new: RunState) -> None:
+        with self._lock:
+            old, self._state = self._state, new
+        if old != new:
+            self._emit(
+                EventKind.STATE_CHANGED,
+                f"{old.value} -> {new.value}",
+                state=new.value,
+                previous=old.value,
+            )
+
+    def _emit(self, kind: EventKind, text: str = "", /, **data: Any) -> None:
+        self._bus.emit(RunEvent(kind, text, data))
+
+    def _log(self, level: str, message: str) -> None:
+        if self._writer is not None and not self._writer.closed:
+            try:
+                self._writer.log(level, message)
+            except Exception:
+                pass
+        if level in ("warning", "error"):
+            self._emit(EventKind.WARNING, message, message=message, level=level)
+
+    def _check_boundary(self) -> None:
+        """At a point boundary: honour pause (wait) and abort (raise)."""
+        while not self._running.is_set():
+            self._running.wait(0.1)
+        if self._abort.is_set():
+            raise _Aborted()
+
+    def _scan_specs(self, time_s: NDArray[np.float64]) -> list[ScanSpec]:
+        proto = self.protocol_file.protocol
+        specs = []
+        for d in self.plan.directions:
+            b = proto.burst[d]  # type: ignore[index]
+            specs.append(
+                ScanSpec(
+                    direction=d,
+                    amplitudes=self.plan.amplitudes,
+                    amplitude_units=self.plan.amplitude_units,
+                    cylinders=self.plan.cylinders,
+                    time_s=time_s,
+                    f_center_Hz=b.f_center,
+                    cycles=b.cycles,
+                    width_s=b.width,
+                    averages=proto.averages,
+                    drive_units="V",
+                )
+            )
+        return specs
+
+    def _acquisition_config(self) -> AcquisitionConfig:
+        acq = self.protocol_file.protocol.acquisition
+        daq = self.bench_file.bench.daq
+        return AcquisitionConfig(
+            sample_rate_Hz=acq.rate,
+            n_samples=acq.n_samples(),
+            n_pretrigger=acq.n_pretrigger,
+            velocity_channel=daq.velocity_channel,
+            reference_channel=daq.reference_channel,
+            velocity_range_V=daq.velocity_range,
+            reference_range_V=daq.reference_range,
+            trigger_source=daq.trigger,
+            timeout_s=acq.timeout,
+        )
+
+    def _safe_state(self) -> list[str]:
+        problems = []
+        gen = self.instruments.generator
+        for ch in sorted(set(self.bench_file.bench.direction_channel.values())):
+            try:
+                gen.output(ch, False)
+            except Exception as exc:
+                problems.append(f"generator output {ch} off: {exc}")
+        for name, inst in self.instruments.all().items():
+            try:
+                inst.safe_state()
+            except Exception as exc:
+                problems.append(f"{name} safe state: {exc}")
+        return problems
+
+    # -- the run ---------------------------------------------------------------------------
+    def run(self) -> RunResult:
+        """Run to the end (blocking). Never raises for instrument faults: see ``result``."""
+        t0 = time.monotonic()
+        status, reason = "failed", ""
+        n_done = n_failed = 0
+        with self._lock:
+            if self._state != RunState.IDLE:
+                raise RuntimeError("a RunEngine runs once; make a new one")
+            self._state = RunState.RUNNING
+        self._emit(EventKind.STATE_CHANGED, "idle -> running", state="running", previous="idle")
+        try:
+            n_done, n_failed, status, reason = self._run_points(t0)
+        except _Aborted:
+            status, reason = "aborted", self._abort_reason or "aborted"
+        except KeyboardInterrupt:
+            status, reason = "aborted", "interrupted (Ctrl-C)"
+        except InstrumentError as exc:
+            status, reason = "failed", f"{type(exc).__name__}: {exc}"
+        except Exception as exc:
+            status, reason = "failed", f"unexpected {type(exc).__name__}: {exc}"
+        finally:
+            problems = self._safe_state()
+            for p in problems:
+                self._log("error", p)
+            if self._writer is not None:
+                try:
+                    n_done = sum(
+                        int((self._writer.done_mask(x) == PointState.DONE).sum())
+                        for x in self.plan.directions
+                    )
+                except Exception:
+                    pass
+                level = "info" if status == "complete" else "error"
+                self._log(level, f"run {status}" + (f": {reason}" if reason else ""))
+                self._log(
+                    "info",
+                    "instruments in safe state"
+                    + ("" if not problems else f" (with {len(problems)} problem(s))"),
+                )
+                try:
+                    self._writer.close(status)  # type: ignore[arg-type]
+                except Exception as exc:
+                    reason = reason or f"closing the run file failed: {exc}"
+            self._set_state(RunState(status))
+            self.result = RunResult(
+                status, reason, self.out_path, n_done, n_failed, time.monotonic() - t0
+            )
+            self._emit(
+                EventKind.FINISHED,
+                reason or status,
+                status=status,
+                reason=reason,
+                path=str(self.out_path),
+                n_done=n_done,
+                n_failed=n_failed,
+            )
+        return self.result
+
+    def _configure_digitiser(self) -> NDArray[np.float64]:
+        """Set the vibrometer range and configure the acquisition (both before the snapshot);
+        returns the time axis ``[S]`` (s from the trigger)."""
+        inst, bench = self.instruments, self.bench_file.bench
+        if inst.vibrometer.velocity_range() != bench.vibrometer.range:
+            inst.vibrometer.set_velocity_range(bench.vibrometer.range)
+        cfg = self._acquisition_config()
+        rate = float(self.instruments.digitiser.configure(cfg))
+        self._coerced = abs(rate - cfg.sample_rate_Hz) > 1e-6 * cfg.sample_rate_Hz
+        return (np.arange(cfg.n_samples) - cfg.n_pretrigger) / rate
+
+    def _prepare(self, time_s: NDArray[np.float64]) -> None:
+        """Outputs off, stage homed (logged in the open run file)."""
+        inst, bench = self.instruments, self.bench_file.bench
+        if getattr(self, "_coerced", False):
+            self._log("warning", f"digitiser rate coerced to {1 / (time_s[1] - time_s[0]):.6g} S/s")
+        for ch in sorted(set(bench.direction_channel.values())):
+            inst.generator.output(ch, False)
+        if not inst.stage.is_homed():
+            self._log("info", "homing the stage")
+            inst.stage.home()
+
+    def _run_points(self, t0: float) -> tuple[int, int, str, str]:
+        proto = self.protocol_file.protocol
+        inst = self.instruments
+        if self._abort.is_set():
+            raise _Aborted()
+        if self.resume_mode:
+            # the axes come from the file; the instruments are set up after the checks
+            from protocols.runfile import read_run
+
+            stored = read_run(self.out_path)
+            time_s = next(iter(stored.scans.values())).time_s
+            self._writer = resume_run(self.out_path, self.protocol_file, self._scan_specs(time_s))
+            self._log("info", f"resumed (seed {self.seed})")
+            new_time = self._configure_digitiser()
+            if new_time.shape != time_s.shape or not np.allclose(new_time, time_s):
+                raise InstrumentError("the digitiser's time axis differs from the file's")
+            self._prepare(time_s)
+        else:
+            time_s = self._configure_digitiser()
+            self._writer = create_run(
+                self.out_path,
+                backend=inst.backend,
+                chain=inst.chain,
+                scans=self._scan_specs(time_s),
+                protocol_yaml=self.protocol_file.text,
+                bench_yaml=self.bench_file.text,
+                snapshot=inst.snapshot(),
+                seed=self.seed,
+            )
+            self._log("info", f"run started: protocol {proto.name!r}, {self.plan.n_points} points")
+            self._prepare(time_s)
+        writer = self._writer
+        done = {d: writer.done_mask(d) for d in self.plan.directions}
+        todo = [
+            p
+            for p in self.plan.points
+            if done[p.direction][p.amplitude_index, p.cylinder_index] != PointState.DONE
+        ]
+        total = self.plan.n_points
+        n_done = total - len(todo)
+        n_failed = 0
+        self._emit(
+            EventKind.RUN_STARTED,
+            f"{len(todo)} of {total} points to measure",
+            path=str(self.out_path),
+            n_points=total,
+            n_todo=len(todo),
+            estimated_s=self.plan.estimated_s * len(todo) / max(total, 1),
+        )
+        armed: tuple[str, int] | None = None
+        t_start = time.monotonic()
+        for k, point in enumerate(todo):
+            self._check_boundary()
+            if armed != (point.direction, point.amplitude_index):
+                self._arm_generator(point)
+                armed = (point.direction, point.amplitude_index)
+            ok = self._measure_point(point, time_s)
+            if ok:
+                n_done += 1
+            else:
+                n_failed += 1
+                if proto.on_point_failure == "stop":
+                    return (
+                        n_done,
+                        n_failed,
+                        "failed",
+                        (
+                            f"point {point.direction} amplitude {point.amplitude_index + 1} "
+                            f"cylinder {point.cylinder} failed after {proto.retries} retries"
+                        ),
+                    )
+            elapsed = time.monotonic() - t_start
+            left = len(todo) - k - 1
+            self._emit(
+                EventKind.PROGRESS,
+                "",
+                done=total - left,
+                total=total,
+                elapsed_s=elapsed,
+                eta_s=elapsed / (k + 1) * left,
+                direction=point.direction,
+                amplitude=point.amplitude,
+                amplitude_units=self.plan.amplitude_units,
+                cylinder=point.cylinder,
+            )
+        self._check_boundary()
+        if n_failed:
+            self._log("warning", f"{n_failed} point(s) failed and are marked in the file")
+        return n_done, n_failed, "complete", ""
+
+    def _arm_generator(self, point: Point) -> None:
+        """Upload the burst of ``point`` on its direction's channel; only that output on."""
+        bench = self.bench_file.bench
+        gen = self.instruments.generator
+        ch = bench.direction_channel[point.direction]  # type: ignore[index]
+        for other in sorted(set(bench.direction_channel.values()) - {ch}):
+            gen.output(other, False)
+        gen.output(ch, False)
+        shape = self.protocol_file.protocol.burst[point.direction].burst()  # type: ignore[index]
+        gen.configure_burst(
+            ch,
+            BurstConfig(
+                shape=shape,
+                amplitude_Vpp=point.generator_Vpp,
+                sample_rate_Hz=bench.generator.sample_rate,
+                trigger_source="bus",
+            ),
+        )
+        gen.output(ch, True)
+        gen.wait_complete()
+        errs = gen.errors()
+        if errs:
+            raise InstrumentError(f"generator reported: {'; '.join(errs)}")
+        self._log(
+            "info", f"generator channel {ch}: {point.direction} burst {point.generator_Vpp:.4g} Vpp"
+        )
+
+    def _point_data(self, point: Point, attempt: int) -> dict[str, Any]:
+        return {
+            "direction": point.direction,
+            "amplitude_index": point.amplitude_index,
+            "cylinder_index": point.cylinder_index,
+            "amplitude": point.amplitude,
+            "amplitude_units": self.plan.amplitude_units,
+            "cylinder": point.cylinder,
+            "attempt": attempt,
+        }
+
+    def _measure_point(self, point: Point, time_s: NDArray[np.float64]) -> bool:
+        """Measure one point with retries; True when written, False when marked failed."""
+        proto = self.protocol_file.protocol
+        assert self._writer is not None
+        last = ""
+        for attempt in range(proto.retries + 1):
+            if self._abort.is_set():
+                raise _Aborted()
+            self._emit(EventKind.POINT_STARTED, "", **self._point_data(point, attempt))
+            try:
+                velocity, drive = self._acquire(point, time_s)
+            except (InstrumentTimeout, SignalLostError, PointCheckError) as exc:
+                last = f"{type(exc).__name__}: {exc}"
+                self._log(
+                    "warning",
+                    f"{point.direction} A{point.amplitude_index + 1} "
+                    f"cyl {point.cylinder} attempt {attempt + 1}: {last}",
+                )
+                continue
+            self._writer.write_point(
+                point.direction, point.amplitude_index, point.cylinder_index, velocity, drive
+            )
+            self._emit(
+                EventKind.POINT_DONE,
+                "",
+                velocity_m_per_s=velocity,
+                drive=drive,
+                time_s=time_s,
+                **self._point_data(point, attempt),
+            )
+            return True
+        self._writer.mark_failed(point.direction, point.amplitude_index, point.cylinder_index)
+        self._log(
+            "error",
+            f"{point.direction} A{point.amplitude_index + 1} cyl {point.cylinder} "
+            f"failed after {proto.retries + 1} attempts: {last}",
+        )
+        self._emit(EventKind.POINT_FAILED, last, reason=last, **self._point_data(point, -1))
+        return False
+
+    def _acquire(
+        self, point: Point, time_s: NDArray[np.float64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Move, settle, check the signal, take ``averages`` records; velocity (m/s) and drive
+        (V), each ``[S]``."""
+        proto, bench, inst = self.protocol_file.protocol, self.bench_file.bench, self.instruments
+        inst.stage.move_to(point.position_m)
+        if not inst.wait(proto.settle, self._abort):
+            raise _Aborted()
+        level = float(inst.vibrometer.signal_level())
+        if level < bench.vibrometer.min_signal_level:
+            raise SignalLostError(
+                f"vibrometer signal level {level:.2f} below {bench.vibrometer.min_signal_level:.2f}"
+                f" at cylinder {point.cylinder}"
+            )
+        sens = float(inst.vibrometer.sensitivity_m_per_s_per_V())
+        delay = float(inst.vibrometer.signal_delay_s())
+        clip_V = CLIP_FRACTION * bench.daq.velocity_range
+        v_sum = np.zeros_like(time_s)
+        d_sum = np.zeros_like(time_s)
+        for _ in range(proto.averages):
+            if self._abort.is_set():
+                raise _Aborted()
+            inst.digitiser.arm()
+            inst.generator.trigger()
+            rec = inst.digitiser.read()
+            v = np.asarray(rec.velocity_V, dtype=np.float64)
+            d = np.asarray(rec.reference_V, dtype=np.float64)
+            if v.shape != time_s.shape or d.shape != time_s.shape:
+                raise PointCheckError(f"record of {v.shape} samples, expected {time_s.shape}")
+            if not (np.all(np.isfinite(v)) and np.all(np.isfinite(d))):
+                raise PointCheckError("record holds NaN or infinite samples")
+            if np.max(np.abs(v)) >= clip_V:
+                raise PointCheckError(
+                    f"velocity clipped at {clip_V:.3g} V: choose a larger vibrometer range"
+                )
+            v_sum += v
+            d_sum += d
+        v_mean = v_sum / proto.averages * sens
+        if delay != 0.0:  # the decoder output lags: v_true(t) = v_out(t + delay)
+            v_mean = np.interp(time_s + delay, time_s, v_mean)
+        return v_mean, d_sum / proto.averages

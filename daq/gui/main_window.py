@@ -1,0 +1,691 @@
+"""The bench window: bench panel, protocol panel, run controls, log and live views.
+
+Threading: the run engine runs on its own thread (:meth:`daq.engine.RunEngine.start`); its
+events reach :meth:`MainWindow._on_events` through :class:`EngineEventAdapter` (a queued Qt
+signal). Connecting, instrument snapshots, safe state, reading run files and exporting
+figures run through :class:`BackgroundCall`. The GUI thread only draws.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from PySide6.QtCore import Qt, QTimer, Signal
+from PySide6.QtGui import QAction, QCloseEvent
+from PySide6.QtWidgets import (
+    QApplication,
+    QFileDialog,
+    QMainWindow,
+    QMessageBox,
+    QSplitter,
+    QVBoxLayout,
+    QWidget,
+)
+
+from daq.gui import refcount_guard
+from daq.gui.adapter import EngineEventAdapter
+from daq.gui.background import BackgroundCall
+from daq.gui.live_data import LiveData
+from daq.gui.panels import BenchPanel, LogView, ProtocolPanel, RunPanel, format_duration
+from daq.gui.views import LiveViews
+
+__all__ = ["Assembler", "MainWindow"]
+
+#: builds the instruments of a bench file (default: :func:`daq.bench_assembly.assemble`)
+Assembler = Callable[[Any, "int | None"], Any]
+
+#: ms between redraws of the live views while events arrive
+REDRAW_MS = 100
+
+
+def _default_assembler(bf: Any, seed: int | None) -> Any:
+    from daq.bench_assembly import assemble
+
+    return assemble(bf, seed=seed)
+
+
+class MainWindow(QMainWindow):
+    """The bench window.
+
+    Parameters
+    ----------
+    bench_path:
+        Bench file; ``None``: the shipped simulated bench.
+    protocol_path:
+        Protocol file to open at start (optional).
+    assembler:
+        ``assembler(bench_file, seed) -> BenchInstruments`` (tests pass fakes).
+    """
+
+    #: emitted with the run's status ("complete" | "aborted" | "failed") when a run ends
+    run_finished = Signal(str)
+    #: emitted when a bench connection attempt ends (True: connected)
+    connected = Signal(bool)
+
+    def __init__(
+        self,
+        bench_path: str | Path | None = None,
+        protocol_path: str | Path | None = None,
+        *,
+        assembler: Assembler | None = None,
+    ) -> None:
+        super().__init__()
+        refcount_guard.install()
+        self.setWindowTitle("biafc-lab — bench")
+        self.resize(1500, 950)
+        self._assembler = assembler or _default_assembler
+        self.bench_file: Any = None
+        self.instruments: Any = None
+        self.chain: Any = None
+        self.protocol_file: Any = None
+        self.protocol_path: Path | None = None
+        self.plan: Any = None
+        self.engine: Any = None
+        self.adapter: EngineEventAdapter | None = None
+        self.live = LiveData()
+        self.last_result: Any = None
+        self.run_path: Path | None = None
+        self._dirty = False
+        self._busy_connect = False
+        self._pending_start: tuple[Path | None] | None = None
+        self._build()
+        self._redraw_timer = QTimer(self)
+        self._redraw_timer.setInterval(REDRAW_MS)
+        self._redraw_timer.timeout.connect(self._redraw_if_dirty)
+        self._redraw_timer.start()
+        self.load_bench(bench_path)
+        if protocol_path is not None:
+            self.load_protocol(protocol_path)
+
+    # -- layout ----------------------------------------------------------------------------
+    def _build(self) -> None:
+        self.bench_panel = BenchPanel()
+        self.protocol_panel = ProtocolPanel()
+        self.run_panel = RunPanel()
+        self.log_view = LogView()
+        self.views = LiveViews()
+        left = QSplitter(Qt.Orientation.Vertical)
+        left.addWidget(self.bench_panel)
+        left.addWidget(self.protocol_panel)
+        left.setStretchFactor(0, 2)
+        left.setStretchFactor(1, 3)
+        right = QSplitter(Qt.Orientation.Vertical)
+        right.addWidget(self.views)
+        bottom = QWidget()
+        bl = QVBoxLayout(bottom)
+        bl.setContentsMargins(0, 0, 0, 0)
+        bl.addWidget(self.run_panel)
+        bl.addWidget(self.log_view, 1)
+        right.addWidget(bottom)
+        right.setStretchFactor(0, 3)
+        right.setStretchFactor(1, 1)
+        main = QSplitter(Qt.Orientation.Horizontal)
+        main.addWidget(left)
+        main.addWidget(right)
+        main.setStretchFactor(0, 2)
+        main.setStretchFactor(1, 5)
+        main.setSizes([480, 1020])
+        right.setSizes([640, 310])
+        self.setCentralWidget(main)
+        self.statusBar().showMessage("ready")
+        self._menus()
+        bp, pp, rp = self.bench_panel, self.protocol_panel, self.run_panel
+        bp.open_requested.connect(self._ask_bench)
+        bp.connect_requested.connect(self.connect_bench)
+        bp.refresh_requested.connect(self.refresh_snapshot)
+        bp.safe_state_requested.connect(self.safe_state)
+        pp.open_requested.connect(self._ask_protocol)
+        pp.save_requested.connect(self.save_protocol)
+        pp.dry_run_requested.connect(self.dry_run)
+        pp.text_edited.connect(self._validate_text)
+        rp.start_requested.connect(self.start_run)
+        rp.pause_requested.connect(self.pause)
+        rp.resume_requested.connect(self.resume)
+        rp.abort_requested.connect(self.abort)
+        rp.resume_file_requested.connect(self._ask_resume_file)
+
+    def _menus(self) -> None:
+        m = self.menuBar().addMenu("&File")
+        for text, slot in (
+            ("Open bench…", self._ask_bench),
+            ("Open protocol…", self._ask_protocol),
+            ("Save protocol", self.save_protocol),
+            ("Open run file…", self._ask_run_file),
+            ("Export figures…", self._ask_export),
+        ):
+            act = QAction(text, self)
+            act.triggered.connect(slot)
+            m.addAction(act)
+        m.addSeparator()
+        quit_act = QAction("Quit", self)
+        quit_act.triggered.connect(self.close)
+        m.addAction(quit_act)
+
+    # -- helpers ---------------------------------------------------------------------------
+    def log(self, message: str, level: str = "info") -> None:
+        self.log_view.add(message, level)
+        if level != "info":
+            self.statusBar().showMessage(message, 10000)
+
+    @property
+    def running(self) -> bool:
+        """True while a run is active (running or paused)."""
+        return self.engine is not None and self.engine.state.value in ("running", "paused")
+
+    # -- bench -----------------------------------------------------------------------------
+    def _ask_bench(self) -> None:
+        path, _ = QFileDialog.getOpenFileName(self, "Open bench", "", "Bench files (*.yaml)")
+        if path:
+            self.load_bench(path)
+
+    def load_bench(self, path: str | Path | None) -> bool:
+        """Read and validate a bench file (``None``: the simulated bench). No instrument is
+        opened; :meth:`connect_bench` does that."""
+        from protocols.bench import default_bench_path, load_bench
+        from protocols.yamlfile import ConfigError
+
+        if self.running:
+            self.log("cannot change the bench during a run", "warning")
+            return False
+        try:
+            bf = load_bench(path)
+        except (ConfigError, OSError) as exc:
+            self.bench_panel.status_label.setText(f"✗ {exc}")
+            self.log(str(exc), "error")
+            return False
+        self._disconnect()
+        self.bench_file = bf
+        shown = Path(path) if path is not None else default_bench_path()
+        self.bench_panel.path_edit.setText(str(shown))
+        kind = "simulated" if bf.bench.simulated else "hardware"
+        self.bench_panel.status_label.setText(
+            f"{bf.bench.name} ({kind}, {bf.bench.n_cylinders} cylinders): not connected"
+        )
+        self.log(f"bench {bf.bench.name!r} loaded ({kind})")
+        self._load_chain(bf)
+        if self.protocol_panel.editor.toPlainText().strip():
+            self.protocol_panel.validate_now()
+        return True
+
+    def _load_chain(self, bf: Any) -> None:
+        from daq.bench_assembly import chain_info
+
+        def done(chain: Any, err: BaseException | None) -> None:
+            if bf is not self.bench_file:
+                return
+            if err is not None:
+                self.log(f"quasi-bands of the chain: {err}", "warning")
+                return
+            if self.chain is None:  # a connected bench's chain wins
+                self.chain = chain
+                self.views.show_chain(chain, self._f_in())
+                self.live.chain = self.live.chain or chain
+
+        BackgroundCall(lambda: chain_info(bf), done, name="biafc-gui-chain")
+
+    def _disconnect(self) -> None:
+        inst, self.instruments = self.instruments, None
+        self.chain = None
+        if inst is not None:
+            BackgroundCall(inst.close, lambda r, e: None, name="biafc-gui-close")
+        self.bench_panel.set_connected(False)
+
+    def connect_bench(self) -> None:
+        """Open the bench's instruments on a worker thread, then show their snapshot."""
+        if self.bench_file is None or self._busy_connect or self.running:
+            return
+        bf = self.bench_file
+        seed = bf.bench.simulation.seed if bf.bench.simulation is not None else None
+        self._disconnect()
+        self._busy_connect = True
+        self.bench_panel.set_connected(False, busy=True)
+        self.bench_panel.status_label.setText(f"{bf.bench.name}: connecting…")
+        assembler = self._assembler
+
+        def work() -> tuple[Any, dict[str, Any]]:
+            inst = assembler(bf, seed)
+            return inst, inst.snapshot()
+
+        BackgroundCall(work, lambda r, e: self._connected(bf, r, e), name="biafc-gui-connect")
+
+    def _connected(self, bf: Any, result: Any, err: BaseException | None) -> None:
+        self._busy_connect = False
+        if err is not None or bf is not self.bench_file:
+            msg = f"connect failed: {err}" if err is not None else "bench changed"
+            self.bench_panel.status_label.setText(f"✗ {msg}")
+            self.bench_panel.set_connected(False)
+            self.log(msg, "error")
+            self._pending_start = None
+            self.connected.emit(False)
+            return
+        inst, snap = result
+        self.instruments = inst
+        self.chain = inst.chain
+        self.bench_panel.set_connected(True)
+        self.bench_panel.status_label.setText(f"{bf.bench.name}: connected ({inst.backend})")
+        self.bench_panel.show_snapshot(snap)
+        self.views.show_chain(self.chain, self._f_in())
+        self.log(f"connected to {bf.bench.name!r} ({inst.backend})")
+        self.connected.emit(True)
+        if self._pending_start is not None:
+            (resume_path,) = self._pending_start
+            self._pending_start = None
+            self.start_run(resume_path)
+
+    def refresh_snapshot(self) -> None:
+        """Re-read every instrument's state (not during a run: the engine owns them then)."""
+        if self.instruments is None:
+            return
+        if self.running:
+            self.log("instrument state is refreshed after the run", "warning")
+            return
+        inst = self.instruments
+
+        def done(snap: Any, err: BaseException | None) -> None:
+            if err is None and inst is self.instruments:
+                self.bench_panel.show_snapshot(snap)
+
+        BackgroundCall(inst.snapshot, done, name="biafc-gui-snapshot")
+
+    def safe_state(self) -> None:
+        """During a run: abort (the engine puts every instrument in its safe state).
+        Otherwise: generator outputs off and every instrument's ``safe_state()``."""
+        if self.running:
+            self.abort("safe state requested")
+            return
+        inst = self.instruments
+        if inst is None:
+            return
+
+        def work() -> dict[str, Any]:
+            problems = []
+            bf = self.bench_file
+            for ch in sorted(set(bf.bench.direction_channel.values())):
+                try:
+                    inst.generator.output(ch, False)
+                except Exception as exc:
+                    problems.append(f"generator output {ch} off: {exc}")
+            for name, i in inst.all().items():
+                try:
+                    i.safe_state()
+                except Exception as exc:
+                    problems.append(f"{name}: {exc}")
+            if problems:
+                raise RuntimeError("; ".join(problems))
+            snap: dict[str, Any] = inst.snapshot()
+            return snap
+
+        def done(snap: Any, err: BaseException | None) -> None:
+            if err is not None:
+                self.log(f"safe state: {err}", "error")
+                return
+            self.log("instruments in safe state")
+            self.bench_panel.show_snapshot(snap)
+
+        BackgroundCall(work, done, name="biafc-gui-safe")
+
+    # -- protocol --------------------------------------------------------------------------
+    def _ask_protocol(self) -> None:
+        path, _ = QFileDialog.getOpenFileName(
+            self, "Open protocol", "protocols", "Protocol files (*.yaml)"
+        )
+        if path:
+            self.load_protocol(path)
+
+    def load_protocol(self, path: str | Path) -> bool:
+        p = Path(path)
+        try:
+            text = p.read_text(encoding="utf-8")
+        except OSError as exc:
+            self.protocol_panel.show_error(f"{p}: {exc.strerror or exc}")
+            self.log(f"{p}: {exc}", "error")
+            return False
+        self.protocol_path = p
+        self.protocol_panel.path_edit.setText(str(p))
+        self.protocol_panel.set_text(text)
+        self.protocol_panel.validate_now()
+        self.log(f"protocol {p.name} opened")
+        return True
+
+    def _validate_text(self, text: str) -> None:
+        """Validate the editor's text against the schema and the bench's limits."""
+        from daq.engine import make_plan
+        from protocols.schema import parse_protocol
+        from protocols.yamlfile import ConfigError
+
+        source = self.protocol_path.name if self.protocol_path else "<protocol>"
+        try:
+            pf = parse_protocol(text, source)
+            proto = pf.protocol
+            try:
+                proto.output.format(name="x", timestamp="x", date="x")
+            except (KeyError, IndexError, ValueError) as exc:
+                raise pf.error(["output"], f"bad pattern ({exc})") from None
+            plan = make_plan(pf, self.bench_file) if self.bench_file is not None else None
+        except ConfigError as exc:
+            self.protocol_file, self.plan = None, None
+            self.protocol_panel.show_error(str(exc))
+            return
+        except Exception as exc:  # a schema corner the validators did not word
+            self.protocol_file, self.plan = None, None
+            self.protocol_panel.show_error(f"{source}: {type(exc).__name__}: {exc}")
+            return
+        self.protocol_file, self.plan = pf, plan
+        summary = f"{proto.name}: valid"
+        if plan is not None:
+            summary += f", {plan.n_points} points, estimated {format_duration(plan.estimated_s)}"
+        self.protocol_panel.show_ok(summary, _protocol_fields(proto, plan))
+        if self.chain is not None:
+            self.views.show_chain(self.chain, self._f_in())
+
+    def _f_in(self) -> float | None:
+        if self.protocol_file is None:
+            return None
+        burst = self.protocol_file.protocol.burst
+        for d in ("ltr", "rtl"):
+            if d in burst:
+                return float(burst[d].f_center)
+        return None
+
+    def save_protocol(self) -> None:
+        path = self.protocol_path
+        if path is None:
+            name, _ = QFileDialog.getSaveFileName(self, "Save protocol", "", "*.yaml")
+            if not name:
+                return
+            path = Path(name)
+        try:
+            path.write_text(self.protocol_panel.editor.toPlainText(), encoding="utf-8")
+        except OSError as exc:
+            self.log(f"saving {path}: {exc}", "error")
+            return
+        self.protocol_path = path
+        self.protocol_panel.path_edit.setText(str(path))
+        self.log(f"protocol saved to {path}" + ("" if self.protocol_panel.valid else " (INVALID)"))
+
+    def dry_run(self) -> None:
+        """Validate and report point count, ETA and output path; nothing moves."""
+        self.protocol_panel.validate_now()
+        if self.protocol_file is None or self.plan is None:
+            self.log("dry run: the protocol is not valid (see the protocol panel)", "error")
+            return
+        out = self._output_path()
+        self.log(
+            f"dry run: {self.plan.n_points} points, estimated "
+            f"{format_duration(self.plan.estimated_s)} ({self.plan.estimated_s:.1f} s); "
+            f"output {out}"
+        )
+
+    # -- run -------------------------------------------------------------------------------
+    def _output_path(self) -> Path:
+        text = self.run_panel.out_edit.text().strip()
+        if text:
+            return Path(text)
+        path: Path = self.protocol_file.protocol.output_path()
+        return path
+
+    def _ask_resume_file(self) -> None:
+        path, _ = QFileDialog.getOpenFileName(self, "Resume run file", "runs", "Run files (*.h5)")
+        if path:
+            self.start_run(Path(path))
+
+    def start_run(self, resume_path: Path | None = None) -> bool:
+        """Start the protocol (or continue ``resume_path``); connects the bench first if
+        needed. Returns False when it cannot start (the reason is logged)."""
+        from daq.engine import RunEngine
+        from daq.store import StoreError, check_output_path, stored_seed
+
+        if self.running:
+            return False
+        if not isinstance(resume_path, Path):
+            resume_path = None  # a clicked() bool
+        self.protocol_panel.validate_now()
+        if self.protocol_file is None or self.plan is None:
+            self.log("cannot start: the protocol is not valid (see the protocol panel)", "error")
+            return False
+        if self.instruments is None:
+            self._pending_start = (resume_path,)
+            self.run_panel.set_state("starting")
+            self.connect_bench()
+            return True
+        resume = resume_path is not None
+        out = resume_path if resume_path is not None else self._output_path()
+        try:
+            check_output_path(out, resume=resume)
+            seed = stored_seed(out) if resume else None
+        except (StoreError, OSError) as exc:
+            self.log(f"cannot start: {exc}", "error")
+            self.run_panel.set_state("idle")
+            return False
+        bf = self.bench_file
+        if seed is None and bf.bench.simulation is not None:
+            seed = bf.bench.simulation.seed
+        try:
+            engine = RunEngine(
+                self.protocol_file, bf, self.instruments, out, resume=resume, seed=seed
+            )
+        except Exception as exc:
+            self.log(f"cannot start: {exc}", "error")
+            self.run_panel.set_state("idle")
+            return False
+        self.live = LiveData.for_plan(engine.plan, self.protocol_file.protocol, self.chain)
+        self.views.show_chain(self.chain, self._f_in())
+        adapter = EngineEventAdapter(self)
+        adapter.events_ready.connect(self._on_events)
+        engine.subscribe(adapter)
+        self.engine, self.adapter, self.run_path = engine, adapter, out
+        self.last_result = None
+        self.run_panel.progress.setMaximum(engine.plan.n_points)
+        self.run_panel.progress.setValue(0)
+        self.run_panel.set_state("running")
+        self.log(f"{'resuming' if resume else 'starting'} run -> {out}")
+        engine.start()
+        return True
+
+    def pause(self) -> None:
+        if self.engine is not None:
+            self.engine.pause()
+
+    def resume(self) -> None:
+        if self.engine is not None:
+            self.engine.resume()
+
+    def abort(self, reason: str = "aborted by the user") -> None:
+        if not isinstance(reason, str):
+            reason = "aborted by the user"
+        if self.engine is not None and self.running:
+            self.log(f"aborting: {reason}", "warning")
+            self.engine.abort(reason)
+
+    def _on_events(self) -> None:
+        """GUI thread: handle a batch of engine events."""
+        from daq.engine import EventKind
+
+        sender = self.sender()
+        adapter = sender if isinstance(sender, EngineEventAdapter) else self.adapter
+        if adapter is None:
+            return
+        for ev in adapter.drain():
+            k, d = ev.kind, ev.data
+            if k == EventKind.POINT_DONE:
+                try:
+                    self.live.add_point(d)
+                except Exception as exc:
+                    self.log(f"live view: {exc}", "warning")
+                self._dirty = True
+            elif k == EventKind.PROGRESS:
+                self.run_panel.show_progress(d)
+            elif k == EventKind.STATE_CHANGED:
+                self.run_panel.set_state(str(d["state"]))
+                self.log(f"run {d['state']}")
+            elif k == EventKind.RUN_STARTED:
+                self.log(
+                    f"run {d['path']}: {d['n_todo']} of {d['n_points']} points to measure "
+                    f"(estimated {format_duration(d['estimated_s'])})"
+                )
+            elif k == EventKind.POINT_FAILED:
+                self.log(
+                    f"point {d['direction']} cyl {d['cylinder']} failed: {d.get('reason', '')}",
+                    "warning",
+                )
+            elif k == EventKind.WARNING:
+                self.log(ev.message, str(d.get("level", "warning")))
+            elif k == EventKind.FINISHED:
+                self._finished(d)
+
+    def _finished(self, d: dict[str, Any]) -> None:
+        status = str(d["status"])
+        self.last_result = self.engine.result if self.engine is not None else None
+        self.run_panel.set_state(status)
+        failed = f", {d['n_failed']} failed" if d.get("n_failed") else ""
+        reason = f": {d['reason']}" if d.get("reason") else ""
+        level = "info" if status == "complete" else "error"
+        self.log(f"run {status}{reason} ({d['n_done']} points{failed}) -> {d['path']}", level)
+        self.run_panel.where_label.setText(f"run {status}{reason}")
+        self._redraw()
+        self.refresh_snapshot()
+        self.run_finished.emit(status)
+
+    def _redraw_if_dirty(self) -> None:
+        if self._dirty:
+            self._redraw()
+
+    def _redraw(self) -> None:
+        self._dirty = False
+        self.views.redraw(self.live)
+
+    # -- run files -------------------------------------------------------------------------
+    def _ask_run_file(self) -> None:
+        path, _ = QFileDialog.getOpenFileName(self, "Open run file", "runs", "Run files (*.h5)")
+        if path:
+            self.open_run_file(path)
+
+    def open_run_file(
+        self, path: str | Path, on_done: Callable[[bool], None] | None = None
+    ) -> None:
+        """Read a run file on a worker thread and browse it with the live views."""
+        from protocols.runfile import read_run
+
+        p = Path(path)
+
+        def work() -> tuple[Any, LiveData]:
+            run = read_run(p)
+            return run, LiveData.from_run(run)
+
+        def done(result: Any, err: BaseException | None) -> None:
+            if err is not None:
+                self.log(f"{p}: {err}", "error")
+                if on_done:
+                    on_done(False)
+                return
+            run, live = result
+            if self.running:
+                self.log("a run is active: the file is shown after it ends", "warning")
+                if on_done:
+                    on_done(False)
+                return
+            self.live = live
+            self.run_path = p
+            f_in = next(iter(live.scans.values())).f_center_Hz if live.scans else None
+            self.views.show_chain(live.chain, f_in)
+            self._redraw()
+            self.log(f"opened {p.name}: status {run.status}, {live.n_points} points measured")
+            self.setWindowTitle(f"biafc-lab — {p.name}")
+            if on_done:
+                on_done(True)
+
+        BackgroundCall(work, done, name="biafc-gui-read")
+
+    def _ask_export(self) -> None:
+        path = self.run_path
+        if path is None:
+            name, _ = QFileDialog.getOpenFileName(self, "Run file", "runs", "Run files (*.h5)")
+            if not name:
+                return
+            path = Path(name)
+        self.export_figures(path)
+
+    def export_figures(
+        self,
+        path: str | Path,
+        out_dir: str | Path | None = None,
+        on_done: Callable[[bool], None] | None = None,
+    ) -> None:
+        """Write the paper's figures of a run file (``biafc figures``) on a worker thread."""
+        from analysis.report import write_figures
+        from protocols.runfile import read_run
+
+        p = Path(path)
+        out = Path(out_dir) if out_dir is not None else p.with_name(p.stem + "_figures")
+        if self.running and p == self.run_path:
+            self.log("export: the run is still being written", "warning")
+            return
+
+        def done(result: Any, err: BaseException | None) -> None:
+            if err is not None:
+                self.log(f"export figures: {err}", "error")
+            else:
+                self.log(f"figures of {p.name} written to {out}")
+            if on_done:
+                on_done(err is None)
+
+        BackgroundCall(lambda: write_figures(read_run(p), out), done, name="biafc-gui-export")
+
+    # -- closing ---------------------------------------------------------------------------
+    def confirm_close(self) -> bool:
+        """Ask whether to abort the active run and close (tests replace this)."""
+        answer = QMessageBox.question(
+            self,
+            "Run in progress",
+            "A run is in progress. Abort it (instruments go to their safe state) and close?",
+            QMessageBox.StandardButton.Yes | QMessageBox.StandardButton.No,
+            QMessageBox.StandardButton.No,
+        )
+        return answer == QMessageBox.StandardButton.Yes
+
+    def closeEvent(self, event: QCloseEvent) -> None:
+        if self.running:
+            if not self.confirm_close():
+                event.ignore()
+                return
+            self.abort("window closed during the run")
+            deadline = time.monotonic() + 60.0
+            while self.engine.wait(0.05) is None and time.monotonic() < deadline:
+                QApplication.processEvents()
+            QApplication.processEvents()
+            if self.adapter is not None:
+                self._on_events()
+        self._redraw_timer.stop()
+        if self.instruments is not None:
+            try:
+                self.instruments.close()
+            except Exception:
+                pass
+            self.instruments = None
+        event.accept()
+
+
+def _protocol_fields(proto: Any, plan: Any) -> dict[str, str]:
+    """The protocol's resolved fields, SI with units, for the protocol panel."""
+    acq = proto.acquisition
+    out: dict[str, str] = {"name": proto.name, "directions": ", ".join(proto.direction_list)}
+    for d, b in proto.burst.items():
+        shape = f"{b.cycles:g} cycles" if b.cycles is not None else f"width {b.width:g} s"
+        out[f"burst.{d}"] = f"f_center {b.f_center:g} Hz, {shape}"
+    if plan is not None:
+        unit = plan.amplitude_units
+        amps = ", ".join(f"{a:.4g}" for a in plan.amplitudes)
+        out["amplitudes"] = f"[{amps}] {'m' if unit == 'm' else 'Vpp'}"
+        out["cylinders"] = ", ".join(str(int(c)) for c in plan.cylinders)
+        out["points"] = f"{plan.n_points}"
+        out["estimated"] = f"{plan.estimated_s:.1f} s"
+    out["averages"] = str(proto.averages)
+    out["acquisition"] = f"rate {acq.rate:g} S/s, duration {acq.duration:g} s"
+    out["settle"] = f"{proto.settle:g} s"
+    out["order"] = " > ".join(proto.order)
+    out["output"] = proto.output
+    out["on_point_failure"] = f"{proto.on_point_failure}, retries {proto.retries}"
+    return out

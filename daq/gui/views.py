@@ -1,0 +1,307 @@
+"""The live views (pyqtgraph): trace + drive, spectrum, spatial-frequency map, quasi-band
+diagram, amplitude-sweep map. Each view takes plain arrays from :mod:`daq.gui.live_data`;
+none touches instruments. Traces are min/max decimated (:mod:`daq.gui.decimate`)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pyqtgraph as pg
+from numpy.typing import NDArray
+from PySide6.QtWidgets import QTabWidget, QWidget
+
+from daq.gui import refcount_guard
+from daq.gui.decimate import minmax_decimate
+from daq.gui.live_data import LiveData, ScanView, Trace
+from protocols.runfile import ChainInfo
+
+__all__ = [
+    "BandView",
+    "LiveViews",
+    "SpatialMapView",
+    "SpectrumView",
+    "SweepView",
+    "TraceView",
+]
+
+pg.setConfigOptions(antialias=False, background="w", foreground="k")
+
+_CMAP = pg.colormap.get("viridis")
+_BAND_BRUSH = (255, 160, 0, 60)
+_INPUT_PEN = pg.mkPen((220, 0, 0), width=2, style=pg.QtCore.Qt.PenStyle.DashLine)
+_EDGE_PEN = pg.mkPen((255, 140, 0), width=2)
+
+
+def _band_arrays(chain: ChainInfo | None) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    if chain is None:
+        return np.zeros((0, 0)), np.zeros((0, 0))
+    return np.atleast_2d(chain.onset_Hz).astype(float), np.atleast_2d(chain.cutoff_Hz).astype(float)
+
+
+class TraceView(pg.GraphicsLayoutWidget):
+    """The last velocity record (mm/s) above its drive (normalised), time in ms, x linked."""
+
+    def __init__(self, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.p_vel = self.addPlot(row=0, col=0)
+        self.p_vel.setLabel("left", "velocity", units="mm/s")
+        self.p_vel.showGrid(x=True, y=True, alpha=0.3)
+        self.p_drv = self.addPlot(row=1, col=0)
+        self.p_drv.setLabel("left", "drive (norm.)")
+        self.p_drv.setLabel("bottom", "time since trigger", units="ms")
+        self.p_drv.setXLink(self.p_vel)
+        self.p_drv.showGrid(x=True, y=True, alpha=0.3)
+        self.ci.layout.setRowStretchFactor(0, 3)
+        self.ci.layout.setRowStretchFactor(1, 1)
+        self.c_vel = self.p_vel.plot(pen=pg.mkPen((20, 60, 200), width=1))
+        self.c_drv = self.p_drv.plot(pen=pg.mkPen((200, 40, 40), width=1))
+        for p in (self.p_vel, self.p_drv):
+            p.getAxis("left").enableAutoSIPrefix(False)
+            p.getAxis("bottom").enableAutoSIPrefix(False)
+            p.getAxis("left").setWidth(60)
+        self.n_drawn = 0
+
+    def show_trace(self, tr: Trace) -> None:
+        t_ms = tr.time_s * 1e3
+        x, y = minmax_decimate(t_ms, tr.velocity_m_per_s * 1e3)
+        self.c_vel.setData(x, y)
+        xd, yd = minmax_decimate(t_ms, tr.drive)
+        self.c_drv.setData(xd, yd)
+        self.p_drv.setLabel("left", f"drive ({tr.drive_units})")
+        amp = f"{tr.amplitude * (1e6 if tr.amplitude_units == 'm' else 1):.3g}"
+        unit = "um" if tr.amplitude_units == "m" else "Vpp"
+        self.p_vel.setTitle(f"{tr.direction}  amplitude {amp} {unit}  cylinder {tr.cylinder}")
+        self.n_drawn = int(x.size)
+
+
+class SpectrumView(pg.PlotWidget):
+    """The last record's spectrum (log magnitude) with the input frequency and the quasi-band
+    edges of the measured cylinder marked."""
+
+    def __init__(self, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.setLabel("bottom", "frequency (kHz)")
+        self.setLabel("left", "|V(f)| (m)")
+        self.setLogMode(y=True)
+        self.getAxis("left").enableAutoSIPrefix(False)
+        self.showGrid(x=True, y=True, alpha=0.3)
+        self.curve = self.plot(pen=pg.mkPen((20, 60, 200), width=1.5))
+        self.input_line = pg.InfiniteLine(
+            angle=90,
+            pen=_INPUT_PEN,
+            label="f_in",
+            labelOpts={"color": (200, 0, 0), "position": 0.92},
+        )
+        self.addItem(self.input_line)
+        self.band = pg.LinearRegionItem(brush=_BAND_BRUSH, movable=False)
+        self.band.setZValue(-10)
+        self.addItem(self.band)
+        self.band.hide()
+        self.getPlotItem().addLegend(offset=(-10, 10))
+        self.n_drawn = 0
+
+    def show_spectrum(self, tr: Trace, f_in_Hz: float, chain: ChainInfo | None) -> None:
+        mag = np.where(tr.magnitude > 0, tr.magnitude, np.nan)
+        self.curve.setData(tr.freq_Hz / 1e3, mag)
+        self.input_line.setValue(f_in_Hz / 1e3)
+        onset, cutoff = _band_arrays(chain)
+        i = tr.cylinder - 1
+        if onset.size and 0 <= i < onset.shape[0]:
+            b = _resonance_band(onset, cutoff)
+            self.band.setRegion((onset[i, b] / 1e3, cutoff[i, b] / 1e3))
+            self.band.show()
+        self.setTitle(f"spectrum: {tr.direction}, cylinder {tr.cylinder} (band shaded)")
+        self.n_drawn = int(np.count_nonzero(np.isfinite(mag)))
+
+
+def _resonance_band(onset: NDArray[np.float64], cutoff: NDArray[np.float64]) -> int:
+    for b in range(onset.shape[1]):
+        o, c = onset[:, b], cutoff[:, b]
+        if np.all(np.isfinite(o)) and np.all(o > 0) and np.all(c > o):
+            return b
+    return 0
+
+
+class SpatialMapView(pg.PlotWidget):
+    """Spatial-frequency map: cylinder (y) vs frequency (x), colour = log10 |V(f)|, filling in
+    cylinder by cylinder; band edges of the chain and the input frequency overlaid."""
+
+    def __init__(self, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.setLabel("bottom", "frequency (kHz)")
+        self.setLabel("left", "cylinder")
+        self.image = pg.ImageItem(axisOrder="row-major")
+        self.image.setColorMap(_CMAP)
+        self.addItem(self.image)
+        self.colorbar = pg.ColorBarItem(colorMap=_CMAP, label="log10 |V(f)| (m)", interactive=False)
+        self.colorbar.setImageItem(self.image, insert_in=self.getPlotItem())
+        self.input_line = pg.InfiniteLine(angle=90, pen=_INPUT_PEN)
+        self.addItem(self.input_line)
+        self.onset_curve = self.plot(pen=_EDGE_PEN)
+        self.cutoff_curve = self.plot(pen=_EDGE_PEN)
+        self.n_rows = 0
+
+    def show_map(self, scan: ScanView, ai: int, chain: ChainInfo | None) -> None:
+        mag = scan.spectrum[ai]  # [C, F]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            img = np.log10(mag)
+        finite = np.isfinite(img)
+        self.n_rows = int(np.count_nonzero(finite.any(axis=1)))
+        if not finite.any() or scan.freq_Hz.size < 2:
+            self.image.clear()
+            return
+        lo, hi = np.percentile(img[finite], [5, 100])
+        img = np.where(finite, img, lo - 1)
+        # one row per cylinder number 1..n: a measured cylinder fills the rows nearest to it
+        # (sparse protocols), so the rows line up with the band edges drawn per cylinder
+        cyl = np.sort(scan.cylinders)
+        onset, cutoff = _band_arrays(chain)
+        n_rows = int(max(int(cyl[-1]), onset.shape[0] if onset.size else 0))
+        rows = np.arange(1, n_rows + 1)
+        nearest = np.abs(rows[:, None] - scan.cylinders[None, :].astype(float)).argmin(axis=1)
+        grid = img[nearest]
+        f_khz = scan.freq_Hz / 1e3
+        self.image.setImage(grid, levels=(lo, hi))
+        self.colorbar.setLevels((lo, hi))
+        self.image.setRect(pg.QtCore.QRectF(f_khz[0], 0.5, f_khz[-1] - f_khz[0], n_rows))
+        if len(cyl) <= 12:
+            self.getAxis("left").setTicks([[(int(c), str(int(c))) for c in cyl]])
+        else:
+            self.getAxis("left").setTicks(None)
+        self.input_line.setValue(scan.f_center_Hz / 1e3)
+        if onset.size:
+            b = _resonance_band(onset, cutoff)
+            n = np.arange(1, onset.shape[0] + 1)
+            self.onset_curve.setData(onset[:, b] / 1e3, n)
+            self.cutoff_curve.setData(cutoff[:, b] / 1e3, n)
+        amp = scan.amplitudes[ai] * (1e6 if scan.amplitude_units == "m" else 1)
+        unit = "um" if scan.amplitude_units == "m" else "Vpp"
+        self.setTitle(
+            f"spatial-frequency map: {scan.direction}, {amp:.3g} {unit} "
+            f"({self.n_rows}/{len(cyl)} cylinders)"
+        )
+        self.setXRange(f_khz[0], f_khz[-1], padding=0)
+        self.setYRange(0.5, n_rows + 0.5, padding=0)
+
+
+class BandView(pg.PlotWidget):
+    """Quasi-band diagram of the bench's chain: each band's onset..cutoff per cylinder."""
+
+    COLOURS = ((255, 160, 0, 90), (60, 160, 60, 90), (60, 90, 220, 90), (160, 60, 160, 90))
+
+    def __init__(self, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.setLabel("bottom", "cylinder")
+        self.setLabel("left", "frequency (kHz)")
+        self.showGrid(x=True, y=True, alpha=0.3)
+        self.setTitle("quasi-band diagram of the chain")
+        self.input_line = pg.InfiniteLine(
+            angle=0,
+            pen=_INPUT_PEN,
+            label="f_in",
+            labelOpts={"color": (200, 0, 0), "position": 0.95},
+        )
+        self.n_bands = 0
+        self._items: list[object] = []
+
+    def show_chain(self, chain: ChainInfo | None, f_in_Hz: float | None = None) -> None:
+        for it in self._items:
+            self.removeItem(it)
+        self._items = []
+        onset, cutoff = _band_arrays(chain)
+        n = np.arange(1, onset.shape[0] + 1, dtype=float)
+        self.n_bands = int(onset.shape[1]) if onset.size else 0
+        for b in range(self.n_bands):
+            col = self.COLOURS[b % len(self.COLOURS)]
+            lo = self.plot(n, onset[:, b] / 1e3, pen=pg.mkPen(col[:3], width=1.5))
+            hi = self.plot(n, cutoff[:, b] / 1e3, pen=pg.mkPen(col[:3], width=1.5))
+            fill = pg.FillBetweenItem(lo, hi, brush=col)
+            self.addItem(fill)
+            self._items += [lo, hi, fill]
+        if f_in_Hz is not None:
+            self.input_line.setValue(f_in_Hz / 1e3)
+            self.addItem(self.input_line)
+            self._items.append(self.input_line)
+
+
+class SweepView(pg.PlotWidget):
+    """Amplitude-sweep map: cylinder (x) vs drive amplitude (y), colour = |V(f_in)| normalised
+    per amplitude (how far the input frequency travels at each amplitude)."""
+
+    def __init__(self, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.setLabel("bottom", "cylinder")
+        self.setLabel("left", "amplitude index")
+        self.image = pg.ImageItem(axisOrder="row-major")
+        self.image.setColorMap(_CMAP)
+        self.addItem(self.image)
+        self.colorbar = pg.ColorBarItem(
+            colorMap=_CMAP, label="log10 of |V(f_in)| / row max", interactive=False
+        )
+        self.colorbar.setImageItem(self.image, insert_in=self.getPlotItem())
+        self.setTitle("amplitude sweep: |V(f_in)| per cylinder (one amplitude per row)")
+        self.n_cells = 0
+
+    def show_sweep(self, scan: ScanView) -> None:
+        a = scan.at_input  # [A, C]
+        finite = np.isfinite(a) & (a > 0)
+        self.n_cells = int(np.count_nonzero(finite))
+        if not finite.any():
+            self.image.clear()
+            return
+        with np.errstate(divide="ignore", invalid="ignore"):
+            row_max = np.max(np.where(finite, a, 0.0), axis=1, keepdims=True)
+            img = np.log10(np.where(finite, a / np.where(row_max > 0, row_max, 1.0), np.nan))
+        lo = max(float(np.nanmin(img)), -4.0)
+        img = np.where(np.isfinite(img), img, lo - 1)
+        order = np.argsort(scan.cylinders)
+        img = img[:, order]
+        self.image.setImage(img, levels=(lo, 0.0))
+        self.colorbar.setLevels((lo, 0.0))
+        n_a, n_c = img.shape
+        self.image.setRect(pg.QtCore.QRectF(0.5, -0.5, n_c, n_a))
+        cyl = scan.cylinders[order]
+        self.getAxis("bottom").setTicks([[(k + 1, str(int(c))) for k, c in enumerate(cyl)]])
+        scale = 1e6 if scan.amplitude_units == "m" else 1.0
+        unit = "um" if scan.amplitude_units == "m" else "Vpp"
+        self.getAxis("left").setTicks(
+            [[(k, f"{v * scale:.3g} {unit}") for k, v in enumerate(scan.amplitudes)]]
+        )
+        self.setLabel("left", "amplitude")
+        self.setTitle(f"amplitude sweep ({scan.direction}): |V(f_in)|, normalised per row")
+
+
+class LiveViews(QTabWidget):
+    """The tabs of live views, redrawn from a :class:`LiveData`."""
+
+    def __init__(self, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        refcount_guard.install()
+        self.trace = TraceView()
+        self.spectrum = SpectrumView()
+        self.spatial = SpatialMapView()
+        self.bands = BandView()
+        self.sweep = SweepView()
+        self.addTab(self.trace, "Trace")
+        self.addTab(self.spectrum, "Spectrum")
+        self.addTab(self.spatial, "Spatial-frequency map")
+        self.addTab(self.bands, "Quasi-bands")
+        self.addTab(self.sweep, "Amplitude sweep")
+        self.n_redraws = 0
+
+    def redraw(self, data: LiveData) -> None:
+        """Draw everything from ``data`` (called at most a few times a second)."""
+        tr = data.last
+        f_in = None
+        if tr is not None:
+            self.trace.show_trace(tr)
+            scan = data.scans.get(tr.direction)
+            f_in = scan.f_center_Hz if scan is not None else None
+            self.spectrum.show_spectrum(tr, f_in or 0.0, data.chain)
+            if scan is not None:
+                ai = int(np.argmin(np.abs(scan.amplitudes - tr.amplitude)))
+                self.spatial.show_map(scan, ai, data.chain)
+                self.sweep.show_sweep(scan)
+        self.n_redraws += 1
+
+    def show_chain(self, chain: ChainInfo | None, f_in_Hz: float | None = None) -> None:
+        self.bands.show_chain(chain, f_in_Hz)

@@ -1,0 +1,314 @@
+"""Keysight 33500B / 33600A two-channel waveform generator (SCPI), playing one burst per trigger.
+
+Configuration, as the programming guide orders it (per channel ``n``)::
+
+    OUTPn OFF                                  output stays off until armed
+    SOURn:DATA:VOL:CLE                          clear volatile arb memory
+    FORM:BORD SWAP                              binary blocks little-endian (set explicitly)
+    SOURn:DATA:ARB:DAC BIAFCn,#<n><len><int16...>   the burst as DAC codes -32767..32767
+    SOURn:FUNC ARB ; SOURn:FUNC:ARB BIAFCn ; SOURn:FUNC:ARB:SRAT <Sa/s>
+    OUTPn:LOAD INF                              high impedance (piezo amplifier input)
+    SOURn:VOLT:LIM:HIGH/LOW, SOURn:VOLT:LIM:STAT ON  hard output limits (bench safety)
+    SOURn:VOLT <Vpp> ; SOURn:VOLT:OFFS <V>
+    SOURn:BURS:MODE TRIG ; SOURn:BURS:NCYC 1 ; SOURn:BURS:STAT ON
+    TRIGn:SOUR BUS|EXT|IMM
+    OUTP:TRIG:SOUR CHn ; OUTP:TRIG:SLOP POS ; OUTP:TRIG ON   trigger out to the digitiser
+    SYST:ERR? until +0                          any error: outputs off, ReplyError
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import re
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from instruments.burst import burst_samples
+from instruments.errors import InstrumentError, LimitError, ReplyError
+from instruments.interfaces import BurstConfig, Transport
+
+__all__ = ["DAC_FULL_SCALE", "GeneratorLimits", "KeysightGenerator", "dac_codes"]
+
+log = logging.getLogger(__name__)
+
+#: DAC code of a normalised sample of +1 (the 33500B/33600A arb range is -32767..+32767)
+DAC_FULL_SCALE = 32767
+_TRIGGER_SOURCE = {"bus": "BUS", "external": "EXT", "immediate": "IMM"}
+_ERROR_RE = re.compile(r'^\s*([+-]?\d+)\s*,\s*"(.*)"\s*$')
+_MAX_ERRORS = 64
+
+
+@dataclass(frozen=True)
+class GeneratorLimits:
+    """Safety and device limits, from the bench file (refused before anything is sent).
+
+    Attributes
+    ----------
+    max_piezo_V:
+        Largest |voltage| allowed at the piezo terminals (V).
+    amplifier_gain:
+        Power amplifier voltage gain (V/V): piezo V = generator V x gain.
+    max_amplitude_Vpp:
+        Generator's own maximum amplitude at the load setting (Vpp; 20 Vpp into high Z for
+        the 33500B, or the bench's lower cap).
+    max_sample_rate_Hz:
+        Arbitrary-waveform sample-rate ceiling (Sa/s).
+    max_points:
+        Largest arbitrary waveform (samples).
+    """
+
+    max_piezo_V: float
+    amplifier_gain: float
+    max_amplitude_Vpp: float = 20.0
+    max_sample_rate_Hz: float = 160.0e6
+    max_points: int = 1_000_000
+
+    def __post_init__(self) -> None:
+        for name in ("max_piezo_V", "amplifier_gain", "max_amplitude_Vpp", "max_sample_rate_Hz"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise LimitError(f"generator limits: {name} must be > 0, got {value!r}")
+        if self.max_points < 8:
+            raise LimitError(f"generator limits: max_points must be >= 8, got {self.max_points}")
+
+    @property
+    def max_generator_peak_V(self) -> float:
+        """Largest |V| at the generator terminals allowed by both limits."""
+        return min(0.5 * self.max_amplitude_Vpp, self.max_piezo_V / self.amplifier_gain)
+
+    def check(self, config: BurstConfig) -> None:
+        """Raise :class:`LimitError` (numbers in the message) if ``config`` breaks a limit."""
+        if config.amplitude_Vpp + 2 * abs(config.offset_V) > self.max_amplitude_Vpp:
+            raise LimitError(
+                f"generator amplitude {config.amplitude_Vpp:g} Vpp with offset "
+                f"{config.offset_V:g} V exceeds the generator maximum "
+                f"{self.max_amplitude_Vpp:g} Vpp at high-Z load"
+            )
+        piezo_V = config.peak_V * self.amplifier_gain
+        if piezo_V > self.max_piezo_V:
+            raise LimitError(
+                f"peak at the piezo {piezo_V:g} V (generator peak {config.peak_V:g} V x gain "
+                f"{self.amplifier_gain:g}) exceeds the piezo limit {self.max_piezo_V:g} V"
+            )
+        if config.sample_rate_Hz > self.max_sample_rate_Hz:
+            raise LimitError(
+                f"arb sample rate {config.sample_rate_Hz:g} Sa/s exceeds the generator maximum "
+                f"{self.max_sample_rate_Hz:g} Sa/s"
+            )
+
+
+def dac_codes(samples: NDArray[np.float64]) -> NDArray[np.int16]:
+    """Normalised samples ``[n]`` in [-1, 1] -> int16 DAC codes ``[n]`` (+1 -> 32767).
+
+    Raises :class:`LimitError` on NaN/inf or |sample| > 1.
+    """
+    x = np.asarray(samples, dtype=np.float64)
+    if x.ndim != 1:
+        raise LimitError(f"waveform must be 1-D, got shape {x.shape}")
+    if not np.all(np.isfinite(x)):
+        bad = int(np.flatnonzero(~np.isfinite(x))[0])
+        raise LimitError(f"waveform sample {bad} is not finite ({x[bad]!r})")
+    peak = float(np.max(np.abs(x))) if x.size else 0.0
+    if peak > 1.0 + 1e-12:
+        raise LimitError(f"waveform must be normalised to |x| <= 1, peak is {peak:g}")
+    return np.rint(np.clip(x, -1.0, 1.0) * DAC_FULL_SCALE).astype(np.int16)
+
+
+class KeysightGenerator:
+    """Keysight 33500B / 33600A on a :class:`Transport` (implements ``FunctionGenerator``).
+
+    Parameters
+    ----------
+    transport:
+        An open transport (VISA in the lab, :class:`SimTransport` in the simulated bench).
+    limits:
+        Safety limits; every burst is checked against them before a byte is sent.
+    channels:
+        Channel numbers available (1-based).
+    """
+
+    def __init__(
+        self, transport: Transport, limits: GeneratorLimits, channels: tuple[int, ...] = (1, 2)
+    ) -> None:
+        self.transport = transport
+        self.limits = limits
+        self.channels = tuple(channels)
+        self._configs: dict[int, BurstConfig] = {}
+        self._outputs: dict[int, bool] = {ch: False for ch in self.channels}
+        self._idn: str | None = None
+
+    # --- identity and errors ----------------------------------------------------------------
+    def identify(self) -> str:
+        """``*IDN?`` -> ``"Keysight Technologies,33522B,MY...,x.y"`` (ReplyError if malformed)."""
+        reply = self.transport.query("*IDN?")
+        if reply.count(",") != 3:
+            raise ReplyError(f"{self.transport.name}: malformed *IDN? reply {reply!r}")
+        self._idn = reply
+        return reply
+
+    def errors(self) -> list[str]:
+        """Drain ``SYST:ERR?`` until ``+0``; returns e.g. ``["-222,Data out of range"]``."""
+        found: list[str] = []
+        for _ in range(_MAX_ERRORS):
+            reply = self.transport.query("SYST:ERR?")
+            m = _ERROR_RE.match(reply)
+            if m is None:
+                raise ReplyError(f"{self.transport.name}: malformed SYST:ERR? reply {reply!r}")
+            if int(m.group(1)) == 0:
+                return found
+            found.append(f"{int(m.group(1))},{m.group(2)}")
+        raise ReplyError(f"{self.transport.name}: error queue does not drain: {found[-3:]}")
+
+    def check_errors(self, context: str) -> None:
+        """Raise :class:`ReplyError` listing the queued errors after ``context``."""
+        errs = self.errors()
+        if errs:
+            raise ReplyError(f"{self.transport.name}: {context}: " + "; ".join(errs))
+
+    # --- configuration ----------------------------------------------------------------------
+    def _check_channel(self, channel: int) -> None:
+        if channel not in self.channels:
+            raise LimitError(f"generator channel {channel!r} not in {self.channels}")
+
+    def configure_burst(self, channel: int, config: BurstConfig) -> None:
+        """Upload and arm ``config`` on ``channel`` (1-based); the output stays off.
+
+        Limits and waveform are checked before anything is sent; any failure while
+        configuring leaves the generator in its safe state (outputs off).
+        """
+        self._check_channel(channel)
+        self.limits.check(config)
+        samples = burst_samples(config.shape, config.sample_rate_Hz)
+        self.configure_waveform(channel, samples, config)
+
+    def configure_waveform(
+        self, channel: int, samples: NDArray[np.float64], config: BurstConfig
+    ) -> None:
+        """As :meth:`configure_burst` with explicit normalised ``samples`` ``[n]`` (|x| <= 1)."""
+        self._check_channel(channel)
+        self.limits.check(config)
+        codes = dac_codes(samples)
+        if not 8 <= codes.size <= self.limits.max_points:
+            raise LimitError(
+                f"waveform has {codes.size} samples; the generator takes "
+                f"8..{self.limits.max_points}"
+            )
+        data = codes.astype("<i2").tobytes()
+        self._configs.pop(channel, None)
+        n = channel
+        peak = self.limits.max_generator_peak_V
+        name = f"BIAFC{n}"
+        try:
+            self._write_config(n, name, data, config, peak)
+            self.check_errors(f"configuring channel {n}")
+        except InstrumentError:
+            self.safe_state()
+            raise
+        self._configs[channel] = config
+        self._outputs[channel] = False
+
+    def _write_config(
+        self, n: int, name: str, data: bytes, config: BurstConfig, peak_V: float
+    ) -> None:
+        w = self.transport.write
+        w(f"OUTP{n} OFF")
+        w(f"SOUR{n}:DATA:VOL:CLE")
+        w("FORM:BORD SWAP")
+        self.transport.write_block(f"SOUR{n}:DATA:ARB:DAC {name},", data)
+        w(f"SOUR{n}:FUNC ARB")
+        w(f"SOUR{n}:FUNC:ARB {name}")
+        w(f"SOUR{n}:FUNC:ARB:SRAT {config.sample_rate_Hz:.10g}")
+        w(f"OUTP{n}:LOAD INF")
+        w(f"SOUR{n}:VOLT:LIM:HIGH {peak_V:.6g}")
+        w(f"SOUR{n}:VOLT:LIM:LOW {-peak_V:.6g}")
+        w(f"SOUR{n}:VOLT:LIM:STAT ON")
+        w(f"SOUR{n}:VOLT:OFFS {config.offset_V:.6g}")
+        w(f"SOUR{n}:VOLT {config.amplitude_Vpp:.6g}")
+        w(f"SOUR{n}:BURS:MODE TRIG")
+        w(f"SOUR{n}:BURS:NCYC 1")
+        w(f"SOUR{n}:BURS:STAT ON")
+        w(f"TRIG{n}:SOUR {_TRIGGER_SOURCE[config.trigger_source]}")
+        w(f"OUTP:TRIG:SOUR CH{n}")
+        w("OUTP:TRIG:SLOP POS")
+        w("OUTP:TRIG ON")
+
+    def output(self, channel: int, on: bool) -> None:
+        """Switch ``channel``'s output; switching on needs a configured burst."""
+        self._check_channel(channel)
+        if on and channel not in self._configs:
+            raise InstrumentError(
+                f"{self.transport.name}: configure a burst on channel {channel} before output on"
+            )
+        self.transport.write(f"OUTP{channel} {'ON' if on else 'OFF'}")
+        try:
+            self.check_errors(f"output {channel} {'on' if on else 'off'}")
+        except InstrumentError:
+            self.safe_state()
+            raise
+        self._outputs[channel] = on
+        if on:  # the trigger out follows the channel being played
+            self.transport.write(f"OUTP:TRIG:SOUR CH{channel}")
+
+    def trigger(self) -> None:
+        """Bus trigger (``*TRG``): every channel armed with ``TRIG:SOUR BUS`` fires."""
+        self.transport.write("*TRG")
+
+    def wait_complete(self, timeout_s: float | None = None) -> None:
+        """``*OPC?`` (reply ``1``), optionally with a longer timeout."""
+        old = self.transport.timeout_s
+        if timeout_s is not None:
+            self.transport.timeout_s = timeout_s
+        try:
+            reply = self.transport.query("*OPC?")
+        finally:
+            self.transport.timeout_s = old
+        if reply.strip() not in ("1", "+1"):
+            raise ReplyError(f"{self.transport.name}: unexpected *OPC? reply {reply!r}")
+
+    # --- provenance and safety --------------------------------------------------------------
+    def snapshot(self) -> dict[str, Any]:
+        """Identity, limits and per-channel burst settings (JSON-serialisable, SI units)."""
+        chans: dict[str, Any] = {}
+        for ch in self.channels:
+            cfg = self._configs.get(ch)
+            entry: dict[str, Any] = {"output_on": self._outputs.get(ch, False)}
+            if cfg is not None:
+                entry.update(
+                    f_center_Hz=cfg.shape.f_center_Hz,
+                    cycles=cfg.shape.cycles,
+                    width_s=cfg.shape.width_s,
+                    amplitude_Vpp=cfg.amplitude_Vpp,
+                    offset_V=cfg.offset_V,
+                    sample_rate_Hz=cfg.sample_rate_Hz,
+                    trigger_source=cfg.trigger_source,
+                    load="INF",
+                )
+            chans[str(ch)] = entry
+        return {
+            "model": "Keysight 33500B/33600A",
+            "identity": self._idn,
+            "resource": self.transport.name,
+            "limits": {
+                "max_piezo_V": self.limits.max_piezo_V,
+                "amplifier_gain": self.limits.amplifier_gain,
+                "max_amplitude_Vpp": self.limits.max_amplitude_Vpp,
+            },
+            "channels": chans,
+        }
+
+    def safe_state(self) -> None:
+        """All outputs off; never raises (a dead link is logged)."""
+        for ch in self.channels:
+            try:
+                self.transport.write(f"OUTP{ch} OFF")
+            except Exception as exc:
+                log.warning("%s: could not switch output %d off: %s", self.transport.name, ch, exc)
+            self._outputs[ch] = False
+
+    def close(self) -> None:
+        self.safe_state()
+        self.transport.close()

@@ -1,0 +1,52 @@
+"""Transports: one message channel to one instrument (VISA, serial, scripted fake).
+
+:func:`open_transport` picks the implementation from the resource string: VISA resource
+strings (``TCPIP...``, ``USB...``, ``GPIB...``, ``ASRL...::INSTR``) go to pyvisa, everything
+else (``COM3``, ``/dev/ttyUSB0``, ``socket://``, ``loop://``) to pyserial.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from instruments.errors import InstrumentError
+from instruments.interfaces import Transport
+from instruments.transport.block import encode_block, parse_block
+from instruments.transport.fake import ScriptedTransport
+
+__all__ = ["ScriptedTransport", "encode_block", "open_transport", "parse_block"]
+
+_VISA_PREFIXES = ("TCPIP", "USB", "GPIB", "VXI", "PXI")
+
+
+def _is_visa(resource: str) -> bool:
+    upper = resource.upper()
+    if upper.startswith(_VISA_PREFIXES):
+        return True
+    return upper.startswith("ASRL") and "::" in upper
+
+
+def open_transport(
+    resource: str,
+    *,
+    name: str = "instrument",
+    timeout_s: float = 5.0,
+    **settings: Any,
+) -> Transport:
+    """Open ``resource`` on pyvisa or pyserial.
+
+    ``settings`` go to :class:`~instruments.transport.visa.VisaTransport` (``backend``,
+    terminations) or :class:`~instruments.transport.serial_port.SerialTransport` (``baudrate``,
+    ``parity``...). An empty or unknown resource raises :class:`InstrumentError` naming it.
+    """
+    if not isinstance(resource, str) or not resource.strip():
+        raise InstrumentError(f"{name}: empty instrument resource {resource!r}")
+    if not timeout_s > 0:
+        raise InstrumentError(f"{name}: timeout must be > 0 s, got {timeout_s!r}")
+    if _is_visa(resource):
+        from instruments.transport.visa import VisaTransport
+
+        return VisaTransport(resource, name=name, timeout_s=timeout_s, **settings)
+    from instruments.transport.serial_port import SerialTransport
+
+    return SerialTransport(resource, name=name, timeout_s=timeout_s, **settings)

@@ -1,0 +1,101 @@
+"""Transport on pyvisa: any VISA resource string (default backend pyvisa-py, ``"@py"``)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from instruments.errors import DriverNotInstalledError, InstrumentError, InstrumentTimeout
+from instruments.transport.block import encode_block
+
+__all__ = ["VisaTransport"]
+
+
+class VisaTransport:
+    """A :class:`~instruments.interfaces.Transport` on one pyvisa message-based resource.
+
+    Parameters
+    ----------
+    resource:
+        VISA resource string, e.g. ``"TCPIP::10.0.0.5::INSTR"``.
+    name:
+        Instrument name used in error messages.
+    timeout_s:
+        Per-call timeout in s.
+    backend:
+        pyvisa backend (``"@py"`` pyvisa-py; ``"@sim"`` pyvisa-sim; ``""`` the NI/Keysight VISA).
+    read_termination, write_termination:
+        Line terminations (default ``"\\n"``).
+    """
+
+    def __init__(
+        self,
+        resource: str,
+        *,
+        name: str = "instrument",
+        timeout_s: float = 5.0,
+        backend: str = "@py",
+        read_termination: str = "\n",
+        write_termination: str = "\n",
+        resource_manager: Any = None,
+    ) -> None:
+        import pyvisa
+
+        self.name = f"{name} ({resource})"
+        self.timeout_s = float(timeout_s)
+        self._errors: tuple[type[BaseException], ...] = (pyvisa.errors.VisaIOError,)
+        try:
+            rm = resource_manager or pyvisa.ResourceManager(backend)
+        except (OSError, ValueError) as exc:
+            raise DriverNotInstalledError(
+                f"{self.name}: VISA backend {backend!r} not available ({exc})"
+            ) from None
+        try:
+            res: Any = rm.open_resource(resource)
+            self._res: Any = res
+        except Exception as exc:  # pyvisa raises several types for a bad/unknown resource
+            raise InstrumentError(f"{self.name}: cannot open VISA resource ({exc})") from None
+        self.timeout_s = float(timeout_s)
+        self._res.read_termination = read_termination
+        self._res.write_termination = write_termination
+        self._write_term = write_termination.encode()
+
+    @property
+    def timeout_s(self) -> float:
+        """Per-call timeout in s (sets the VISA resource's timeout)."""
+        return self._timeout_s
+
+    @timeout_s.setter
+    def timeout_s(self, value: float) -> None:
+        self._timeout_s = float(value)
+        res = getattr(self, "_res", None)
+        if res is not None:
+            res.timeout = round(self._timeout_s * 1000)
+
+    def _call(self, what: str, fn: Any, *args: Any) -> Any:
+        try:
+            return fn(*args)
+        except self._errors as exc:
+            if "TMO" in str(exc) or "Timeout" in str(exc) or "timeout" in str(exc):
+                raise InstrumentTimeout(
+                    f"{self.name}: no reply to {what!r} within {self.timeout_s:g} s"
+                ) from None
+            raise InstrumentError(f"{self.name}: {what!r} failed ({exc})") from None
+
+    def write(self, command: str) -> None:
+        self._call(command, self._res.write, command)
+
+    def query(self, command: str) -> str:
+        return str(self._call(command, self._res.query, command)).strip()
+
+    def write_block(self, header: str, data: bytes) -> None:
+        payload = header.encode() + encode_block(data) + self._write_term
+        self._call(header, self._res.write_raw, payload)
+
+    def read(self) -> str:
+        return str(self._call("read", self._res.read)).strip()
+
+    def close(self) -> None:
+        try:
+            self._res.close()
+        except Exception:
+            pass

@@ -1,0 +1,224 @@
+"""The bench file schema: which instruments, where, and the bench's calibration and limits.
+
+A bench file (YAML) is the one source of truth for a physical (or simulated) bench: addresses,
+direction-to-channel map, amplifier gain and piezo limit, generator limits, vibrometer range,
+digitiser channels and rate, the stage positions of the cylinders and the soft limits. With
+``simulated: true`` the ``simulation:`` section configures the simulated world
+(``sim_backend.bench.SimWorldConfig``). See ``protocols/benches/sim_bench.yaml``.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+
+from instruments.units import Duration, Length, SampleRate, UnitError, Velocity, Voltage
+from instruments.units import parse_quantity as _pq
+from protocols.yamlfile import YamlDoc, load_yaml, parse_yaml, validate
+
+__all__ = ["BenchFile", "BenchSpec", "default_bench_path", "load_bench", "parse_bench"]
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+def _per_volt(value: Any, dimension: str) -> float:
+    """``"0.05 um/V"`` -> 5e-8 (SI per volt)."""
+    if not isinstance(value, str) or not value.strip().endswith("/V"):
+        raise UnitError(f"{value!r}: write it per volt, e.g. '0.05 um/V'")
+    return _pq(value.strip()[:-2], dimension)
+
+
+class GeneratorSpec(_Model):
+    resource: str
+    max_amplitude: Voltage = 10.0  # Vpp at the output
+    sample_rate: SampleRate = 1.0e6
+    timeout: Duration = 5.0
+
+
+class AmplifierSpec(_Model):
+    """Power amplifier and piezo: ``gain`` V/V, ``piezo_stroke`` per volt, ``piezo_max`` (V)."""
+
+    gain: float = Field(gt=0)
+    piezo_stroke: float  # m/V, written "0.05 um/V"
+    piezo_max: Voltage  # largest |V| allowed at the piezo terminals
+    kind: Literal["displacement", "force"] = "displacement"
+    force_per_volt: float | None = None  # N/V, written "0.5 N/V"
+
+    @field_validator("piezo_stroke", mode="before")
+    @classmethod
+    def _stroke(cls, v: Any) -> float:
+        return _per_volt(v, "length")
+
+    @field_validator("force_per_volt", mode="before")
+    @classmethod
+    def _force(cls, v: Any) -> float | None:
+        return None if v is None else _per_volt(v, "force")
+
+
+class VibrometerSpec(_Model):
+    resource: str
+    range: str = "VD-09 10mm/s/V"
+    min_signal_level: float = Field(default=0.2, ge=0, le=1)
+    timeout: Duration = 2.0
+
+
+class StageSpec(_Model):
+    resource: str
+    soft_limits: tuple[Length, Length]
+    speed: Velocity = 0.025
+    settle: Duration = 0.2  # wait after each move (the simulated stage settles as long)
+    timeout: Duration = 60.0
+
+    @model_validator(mode="after")
+    def _order(self) -> StageSpec:
+        if not self.soft_limits[0] < self.soft_limits[1]:
+            raise ValueError("soft_limits must be [low, high] with low < high")
+        return self
+
+
+class DaqSpec(_Model):
+    device: str = "Dev1"
+    velocity_channel: str = "Dev1/ai0"
+    reference_channel: str = "Dev1/ai1"
+    trigger: str = "/Dev1/PFI0"
+    max_rate: SampleRate = 2.0e6
+    velocity_range: Voltage = 10.0
+    reference_range: Voltage = 10.0
+
+
+class PositionGrid(_Model):
+    first: Length
+    pitch: Length
+    count: int = Field(ge=1)
+
+
+class SimulationSpec(_Model):
+    """Maps onto ``SimWorldConfig`` (see there for the meaning of each field)."""
+
+    seed: int = Field(default=0, ge=0)
+    speedup: float = Field(default=0.0, ge=0)
+    spot_tolerance: Length = 2.0e-3
+    stage_travel: tuple[Length, Length] = (0.0, 0.5)
+    vibrometer_full_scale: Voltage = 10.0
+    vibrometer_noise: Velocity = 2.0e-6
+    digitiser_noise: Voltage = 3.0e-4
+    adc_bits: int = Field(default=16, ge=1, le=32)
+    dem_duration: Duration = 30.0e-3
+    dem_integrator: str = "default"
+    faults: dict[str, Any] = Field(default_factory=dict)
+
+
+class BenchSpec(_Model):
+    """A validated bench file (SI floats)."""
+
+    name: str
+    simulated: bool = False
+    chain: str | None = None  # chain file (sim_backend.dem) relative to the bench file
+    generator: GeneratorSpec
+    direction_channel: dict[Literal["ltr", "rtl"], Literal[1, 2]]
+    amplifier: AmplifierSpec
+    vibrometer: VibrometerSpec
+    stage: StageSpec
+    daq: DaqSpec = Field(default_factory=DaqSpec)
+    cylinder_positions: list[Length] | PositionGrid
+    simulation: SimulationSpec | None = None
+
+    @model_validator(mode="after")
+    def _check(self) -> BenchSpec:
+        if set(self.direction_channel) != {"ltr", "rtl"}:
+            raise ValueError("direction_channel: map both ltr and rtl to a generator channel")
+        if self.direction_channel["ltr"] == self.direction_channel["rtl"]:
+            raise ValueError("direction_channel: ltr and rtl need different channels")
+        low, high = self.stage.soft_limits
+        for i, p in enumerate(self.positions_m()):
+            if not low <= p <= high:
+                raise ValueError(
+                    f"cylinder_positions: cylinder {i + 1} at {p * 1e3:.4g} mm is outside the "
+                    f"stage soft limits {low * 1e3:.4g}..{high * 1e3:.4g} mm"
+                )
+        if self.simulated and self.simulation is None:
+            object.__setattr__(self, "simulation", SimulationSpec())
+        return self
+
+    def positions_m(self) -> NDArray[np.float64]:
+        """``[N]`` stage position (m) of each cylinder, cylinder order."""
+        cp = self.cylinder_positions
+        if isinstance(cp, PositionGrid):
+            return cp.first + cp.pitch * np.arange(cp.count, dtype=np.float64)
+        return np.asarray(cp, dtype=np.float64)
+
+    @property
+    def n_cylinders(self) -> int:
+        return int(self.positions_m().shape[0])
+
+    @property
+    def generator_V_per_m(self) -> float:
+        """Generator peak volts per metre of actuator displacement (the calibration)."""
+        return 1.0 / (self.amplifier.gain * self.amplifier.piezo_stroke)
+
+    def generator_Vpp(self, amplitude: float, kind: str) -> float:
+        """Generator Vpp for a protocol amplitude of ``kind`` (generator_Vpp or displacement_m)."""
+        if kind == "generator_Vpp":
+            return amplitude
+        return 2.0 * amplitude * self.generator_V_per_m
+
+    def amplitude_limit_error(self, vpp: float) -> str | None:
+        """Why ``vpp`` (generator Vpp) is not allowed on this bench, or ``None``."""
+        if not math.isfinite(vpp) or vpp <= 0:
+            return f"{vpp!r} Vpp is not a positive amplitude"
+        if vpp > self.generator.max_amplitude * (1 + 1e-12):
+            return (
+                f"{vpp:.4g} Vpp is above the generator limit {self.generator.max_amplitude:.4g} Vpp"
+            )
+        piezo_V = 0.5 * vpp * self.amplifier.gain
+        if piezo_V > self.amplifier.piezo_max * (1 + 1e-12):
+            return (
+                f"{vpp:.4g} Vpp gives {piezo_V:.4g} V at the piezo, above its limit "
+                f"{self.amplifier.piezo_max:.4g} V"
+            )
+        return None
+
+
+class BenchFile:
+    """A bench with its source text, its path and its line map."""
+
+    def __init__(self, bench: BenchSpec, doc: YamlDoc, path: Path | None) -> None:
+        self.bench = bench
+        self.doc = doc
+        self.path = path
+
+    @property
+    def text(self) -> str:
+        return self.doc.text
+
+    def chain_path(self) -> Path | None:
+        if self.bench.chain is None:
+            return None
+        p = Path(self.bench.chain)
+        if not p.is_absolute() and self.path is not None:
+            p = self.path.parent / p
+        return p
+
+
+def default_bench_path() -> Path:
+    """The shipped simulated bench, ``protocols/benches/sim_bench.yaml``."""
+    return Path(__file__).resolve().parent / "benches" / "sim_bench.yaml"
+
+
+def load_bench(path: str | Path | None = None) -> BenchFile:
+    """Load and validate a bench file (default: the shipped simulated bench)."""
+    p = Path(path) if path is not None else default_bench_path()
+    doc = load_yaml(p)
+    return BenchFile(validate(doc, BenchSpec), doc, p)
+
+
+def parse_bench(text: str, source: str = "<bench>") -> BenchFile:
+    doc = parse_yaml(text, source)
+    return BenchFile(validate(doc, BenchSpec), doc, None)

@@ -1,0 +1,289 @@
+"""The protocol file schema: what to measure, in which order, with units on every number.
+
+A protocol file (YAML) looks like::
+
+    name: ltr_highamp
+    directions: [ltr]                 # ltr, rtl or both
+    burst:
+      ltr: {f_center: 8.92 kHz, cycles: 5}
+      rtl: {f_center: 6.63 kHz, width: 0.75 ms}
+    amplitudes: [2 Vpp, 5 Vpp]        # generator Vpp, or actuator displacement (um, m); or
+                                      # {start: 0.1 Vpp, stop: 10 Vpp, count: 6, spacing: log}
+    cylinders: all                    # or [1, 5, 16, 31]
+    averages: 4
+    acquisition: {rate: 1 MS/s, duration: 20 ms, pre_trigger: 1 ms}
+    settle: 50 ms
+    order: [direction, amplitude, cylinder]   # outermost loop first
+    output: "runs/{name}_{timestamp}.h5"
+    on_point_failure: continue        # or stop
+    retries: 2
+
+Load with :func:`load_protocol`; every error is one line ``FILE:LINE: field: message``.
+"""
+
+from __future__ import annotations
+
+import math
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+
+from instruments.units import Duration, Frequency, SampleRate, UnitError, parse_quantity
+from protocols.yamlfile import ConfigError, YamlDoc, load_yaml, parse_yaml, validate
+
+__all__ = [
+    "AcquisitionSpec",
+    "AmplitudeRange",
+    "BurstSpec",
+    "Protocol",
+    "ProtocolFile",
+    "load_protocol",
+    "parse_protocol",
+]
+
+Direction = Literal["ltr", "rtl"]
+AmplitudeKind = Literal["generator_Vpp", "displacement_m"]
+LoopName = Literal["direction", "amplitude", "cylinder"]
+
+
+_DEFAULT_ORDER: tuple[LoopName, ...] = ("direction", "amplitude", "cylinder")
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+def parse_amplitude(value: Any) -> tuple[AmplitudeKind, float]:
+    """``"2 Vpp"`` -> ``("generator_Vpp", 2.0)``; ``"1.5 um"`` -> ``("displacement_m", 1.5e-6)``."""
+    kind: AmplitudeKind
+    try:
+        v, kind = parse_quantity(value, "voltage"), "generator_Vpp"
+    except UnitError:
+        try:
+            v, kind = parse_quantity(value, "length"), "displacement_m"
+        except UnitError:
+            raise UnitError(
+                f"amplitude {value!r}: write generator volts peak-to-peak ('2 Vpp') or an "
+                "actuator displacement ('1.5 um')"
+            ) from None
+    if not (math.isfinite(v) and v > 0):
+        raise UnitError(f"amplitude must be > 0, got {value!r}")
+    return kind, v
+
+
+class BurstSpec(_Model):
+    """One direction's burst: centre frequency (Hz) and cycles or width (s)."""
+
+    f_center: Frequency
+    cycles: float | None = None
+    width: Duration | None = None
+
+    @model_validator(mode="after")
+    def _one_of(self) -> BurstSpec:
+        if (self.cycles is None) == (self.width is None):
+            raise ValueError("give exactly one of 'cycles' or 'width'")
+        if self.f_center <= 0:
+            raise ValueError("f_center must be > 0")
+        if self.cycles is not None and not self.cycles > 0:
+            raise ValueError("cycles must be > 0")
+        if self.width is not None and not self.width > 0:
+            raise ValueError("width must be > 0")
+        return self
+
+    def burst(self) -> Any:
+        """The :class:`instruments.burst.Burst` of this spec."""
+        from instruments.burst import Burst
+
+        if self.width is not None:
+            return Burst(self.f_center, cycles=None, width_s=self.width)
+        return Burst(self.f_center, cycles=self.cycles)
+
+
+class AmplitudeRange(_Model):
+    """``count`` amplitudes from ``start`` to ``stop`` (both with units), linear or log spaced."""
+
+    start: str
+    stop: str
+    count: int = Field(ge=1, le=10_000)
+    spacing: Literal["linear", "log"] = "linear"
+
+    @field_validator("start", "stop", mode="before")
+    @classmethod
+    def _quantity(cls, v: Any) -> str:
+        parse_amplitude(v)
+        return str(v)
+
+
+class AcquisitionSpec(_Model):
+    """Digitiser record: rate (S/s), duration after the trigger (s), pre-trigger (s)."""
+
+    rate: SampleRate
+    duration: Duration
+    pre_trigger: Duration = 0.0
+    timeout: Duration = 10.0
+
+    @model_validator(mode="after")
+    def _positive(self) -> AcquisitionSpec:
+        if not self.rate > 0:
+            raise ValueError("rate must be > 0")
+        if not self.duration > 0:
+            raise ValueError("duration must be > 0")
+        if self.pre_trigger < 0:
+            raise ValueError("pre_trigger must be >= 0")
+        if not self.timeout > 0:
+            raise ValueError("timeout must be > 0")
+        return self
+
+    @property
+    def n_pretrigger(self) -> int:
+        return round(self.pre_trigger * self.rate)
+
+    def n_samples(self, rate_Hz: float | None = None) -> int:
+        """Samples per record at ``rate_Hz`` (default: the requested rate)."""
+        r = self.rate if rate_Hz is None else rate_Hz
+        return round(self.pre_trigger * r) + round(self.duration * r)
+
+
+class Protocol(_Model):
+    """A validated protocol. Quantities are SI floats; amplitudes via :meth:`amplitude_values`."""
+
+    name: str = Field(min_length=1)
+    description: str = ""
+    directions: list[Direction] | Literal["both"]
+    burst: dict[Direction, BurstSpec]
+    amplitudes: list[str] | AmplitudeRange
+    cylinders: Literal["all"] | list[Annotated[int, Field(ge=1)]] = "all"
+    averages: int = Field(default=1, ge=1, le=100_000)
+    acquisition: AcquisitionSpec
+    settle: Duration = 0.0
+    order: list[LoopName] = Field(default_factory=lambda: list(_DEFAULT_ORDER))
+    output: str = "runs/{name}_{timestamp}.h5"
+    on_point_failure: Literal["continue", "stop"] = "continue"
+    retries: int = Field(default=2, ge=0, le=100)
+
+    @field_validator("amplitudes", mode="before")
+    @classmethod
+    def _amplitude_list(cls, v: Any) -> Any:
+        if isinstance(v, list):
+            if not v:
+                raise ValueError("give at least one amplitude")
+            kinds = {parse_amplitude(a)[0] for a in v}
+            if len(kinds) > 1:
+                raise ValueError("mix of generator (Vpp) and displacement (m) amplitudes")
+            return [str(a) for a in v]
+        return v
+
+    @field_validator("directions", mode="before")
+    @classmethod
+    def _directions(cls, v: Any) -> Any:
+        if isinstance(v, str) and v in ("ltr", "rtl"):
+            return [v]
+        return v
+
+    @field_validator("settle")
+    @classmethod
+    def _settle(cls, v: float) -> float:
+        if v < 0:
+            raise ValueError("settle must be >= 0")
+        return v
+
+    @model_validator(mode="after")
+    def _check(self) -> Protocol:
+        dirs = self.direction_list
+        if len(set(dirs)) != len(dirs) or not dirs:
+            raise ValueError("directions: list each of ltr, rtl at most once")
+        for d in dirs:
+            if d not in self.burst:
+                raise ValueError(f"burst: no burst for direction {d!r}")
+        if sorted(self.order) != ["amplitude", "cylinder", "direction"]:
+            raise ValueError("order: list direction, amplitude and cylinder once each")
+        if isinstance(self.cylinders, list) and len(set(self.cylinders)) != len(self.cylinders):
+            raise ValueError("cylinders: a cylinder is listed twice")
+        if isinstance(self.amplitudes, AmplitudeRange):
+            k1 = parse_amplitude(self.amplitudes.start)[0]
+            k2 = parse_amplitude(self.amplitudes.stop)[0]
+            if k1 != k2:
+                raise ValueError("amplitudes: start and stop have different kinds of unit")
+        return self
+
+    # -- derived --------------------------------------------------------------------------
+    @property
+    def direction_list(self) -> list[Direction]:
+        return ["ltr", "rtl"] if self.directions == "both" else list(self.directions)
+
+    @property
+    def amplitude_kind(self) -> AmplitudeKind:
+        first = (
+            self.amplitudes.start
+            if isinstance(self.amplitudes, AmplitudeRange)
+            else self.amplitudes[0]
+        )
+        return parse_amplitude(first)[0]
+
+    def amplitude_values(self) -> NDArray[np.float64]:
+        """``[A]`` amplitudes in SI (Vpp or m), in protocol order."""
+        a = self.amplitudes
+        if isinstance(a, AmplitudeRange):
+            lo, hi = parse_amplitude(a.start)[1], parse_amplitude(a.stop)[1]
+            if a.spacing == "log":
+                return np.geomspace(lo, hi, a.count)
+            return np.linspace(lo, hi, a.count)
+        return np.array([parse_amplitude(x)[1] for x in a], dtype=np.float64)
+
+    def cylinder_numbers(self, n_cylinders: int) -> NDArray[np.int32]:
+        """``[C]`` 1-based cylinder numbers for a chain of ``n_cylinders``."""
+        if self.cylinders == "all":
+            return np.arange(1, n_cylinders + 1, dtype=np.int32)
+        return np.asarray(self.cylinders, dtype=np.int32)
+
+    def output_path(self, when: datetime | None = None) -> Path:
+        """The output file from the ``output`` pattern (``{name}``, ``{timestamp}``, ``{date}``)."""
+        t = when or datetime.now(UTC)
+        return Path(
+            self.output.format(
+                name=self.name, timestamp=t.strftime("%Y%m%dT%H%M%S"), date=t.strftime("%Y%m%d")
+            )
+        )
+
+
+class ProtocolFile:
+    """A protocol with its source text and line map (for bench-limit errors with lines)."""
+
+    def __init__(self, protocol: Protocol, doc: YamlDoc) -> None:
+        self.protocol = protocol
+        self.doc = doc
+
+    @property
+    def text(self) -> str:
+        return self.doc.text
+
+    def error(self, path: list[str | int] | tuple[str | int, ...], message: str) -> ConfigError:
+        return self.doc.error(path, message)
+
+
+def _validate(doc: YamlDoc) -> ProtocolFile:
+    try:
+        return ProtocolFile(validate(doc, Protocol), doc)
+    except UnitError as exc:  # raised inside a derived property
+        raise doc.error(("amplitudes",), str(exc)) from None
+
+
+def load_protocol(path: str | Path) -> ProtocolFile:
+    """Load and validate a protocol file; errors are one-line :class:`ConfigError`."""
+    doc = load_yaml(path)
+    pf = _validate(doc)
+    try:
+        pf.protocol.output.format(name="x", timestamp="x", date="x")
+    except (KeyError, IndexError, ValueError) as exc:
+        msg = f"bad pattern ({exc}); use {{name}}, {{timestamp}}, {{date}}"
+        raise doc.error(("output",), msg) from None
+    return pf
+
+
+def parse_protocol(text: str, source: str = "<protocol>") -> ProtocolFile:
+    """Validate protocol text (used by ``--resume`` on the text stored in the run file)."""
+    return _validate(parse_yaml(text, source))

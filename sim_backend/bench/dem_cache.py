@@ -1,0 +1,144 @@
+"""One DEM run per (direction, drive, waveform, window), shared by every cylinder and average.
+
+The world asks :class:`DemRunner` for the chain's response to what the generator played. A run
+is keyed by everything that changes the physics (direction, actuator kind, peak drive, the exact
+waveform samples and their rate, the window and the output rate), kept in a small LRU cache, and
+timed, so the benchmark can split DEM seconds from the software around it.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import time
+from collections import OrderedDict
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, Literal, cast
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = ["DemKey", "DemRecord", "DemRunner", "DemStats", "waveform_digest"]
+
+
+@dataclass(frozen=True)
+class DemKey:
+    """What identifies one DEM run (all SI)."""
+
+    direction: str
+    kind: str
+    amplitude: float
+    waveform_sha1: str
+    waveform_rate_Hz: float
+    duration_s: float
+    sample_rate_Hz: float
+
+
+@dataclass(frozen=True)
+class DemRecord:
+    """The chain's response to one drive.
+
+    Attributes
+    ----------
+    time_s:
+        ``[S]`` seconds from the trigger.
+    velocity_m_per_s:
+        ``[C, S]`` velocity of every cylinder (m/s), cylinder order 1..N.
+    drive:
+        ``[S]`` the applied drive (m or N).
+    """
+
+    time_s: NDArray[np.float64]
+    velocity_m_per_s: NDArray[np.float64]
+    drive: NDArray[np.float64]
+
+
+@dataclass
+class DemStats:
+    """Counters for the benchmark split: DEM calls, cache hits and wall seconds in the DEM."""
+
+    calls: int = 0
+    cache_hits: int = 0
+    dem_s: float = 0.0
+
+    def as_dict(self) -> dict[str, float | int]:
+        return {"dem_calls": self.calls, "dem_cache_hits": self.cache_hits, "dem_s": self.dem_s}
+
+
+def waveform_digest(samples: NDArray[np.float64]) -> str:
+    """SHA-1 of the float64 samples: two waveforms share a DEM run only when identical."""
+    return hashlib.sha1(np.ascontiguousarray(samples, dtype=np.float64).tobytes()).hexdigest()
+
+
+#: computes a record: (key, waveform samples normalised to peak 1) -> DemRecord
+Simulator = Callable[[DemKey, NDArray[np.float64]], DemRecord]
+
+
+class DemRunner:
+    """Runs the DEM on demand and caches the records (least recently used out first)."""
+
+    def __init__(self, simulator: Simulator, cache_size: int = 64) -> None:
+        self._simulate = simulator
+        self._cache: OrderedDict[DemKey, DemRecord] = OrderedDict()
+        self._size = cache_size
+        self.stats = DemStats()
+
+    def record(self, key: DemKey, waveform: NDArray[np.float64]) -> DemRecord:
+        """The record for ``key`` (``waveform``: the normalised samples the key was made of)."""
+        hit = self._cache.get(key)
+        if hit is not None:
+            self._cache.move_to_end(key)
+            self.stats.cache_hits += 1
+            return hit
+        t0 = time.perf_counter()
+        rec = self._simulate(key, waveform)
+        self.stats.dem_s += time.perf_counter() - t0
+        self.stats.calls += 1
+        self._cache[key] = rec
+        while len(self._cache) > self._size:
+            self._cache.popitem(last=False)
+        return rec
+
+    def clear(self) -> None:
+        self._cache.clear()
+
+    def __len__(self) -> int:
+        return len(self._cache)
+
+
+def dem_simulator(chain_spec: Any, integrator: str, dt_s: float | None) -> Simulator:
+    """A :data:`Simulator` backed by ``sim_backend.dem.simulate`` (imported lazily; the chain is
+    built once, on first use)."""
+    state: dict[str, Any] = {}
+
+    def simulate_key(key: DemKey, waveform: NDArray[np.float64]) -> DemRecord:
+        from sim_backend import dem
+
+        chain = state.get("chain")
+        if chain is None:
+            spec = chain_spec if chain_spec is not None else dem.default_chain_spec()
+            chain = state["chain"] = dem.build_chain(spec)
+        drive = dem.Drive(
+            direction=cast(Literal["ltr", "rtl"], key.direction),
+            kind=cast(Literal["displacement", "force"], key.kind),
+            amplitude=key.amplitude,
+            burst=None,
+            waveform=(np.asarray(waveform, dtype=np.float64), key.waveform_rate_Hz),
+        )
+        kwargs: dict[str, Any] = {"integrator": integrator}
+        if dt_s is not None:
+            kwargs["dt_s"] = dt_s
+        res = dem.simulate(
+            chain,
+            [drive],
+            duration_s=key.duration_s,
+            sample_rate_Hz=key.sample_rate_Hz,
+            **kwargs,
+        )
+        return DemRecord(
+            time_s=np.asarray(res.time_s, dtype=np.float64),
+            velocity_m_per_s=np.asarray(res.velocity[0], dtype=np.float64),
+            drive=np.asarray(res.drive[0], dtype=np.float64),
+        )
+
+    return simulate_key

@@ -1,0 +1,107 @@
+"""Quasi-band edges of every cylinder: w^2 M(w) = 4 K sin^2(q/2) for its periodic chain.
+
+Band 0 is the acoustic band [0, c1]; band b >= 1 lies between the b-th and (b+1)-th centre-clamped
+frequencies, from its onset (q = 0: M(w) = 0, a free-free symmetric bending frequency) to its
+cutoff (q = pi: w^2 M(w) = 4K). ``quasi_bands`` uses the DEM cell (J resonators);
+``continuum_bands`` uses the exact beam apparent mass (the check).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from functools import partial
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import brentq
+
+from sim_backend.dem.beam import apparent_mass_kg, beam_modes
+from sim_backend.dem.chain import Chain
+
+__all__ = ["Bands", "cell_apparent_mass_kg", "continuum_bands", "quasi_bands"]
+
+
+@dataclass(frozen=True)
+class Bands:
+    """Per-cylinder band edges. ``onset_Hz``/``cutoff_Hz``: [N, B] in Hz; band 0 is acoustic."""
+
+    onset_Hz: NDArray[np.float64]
+    cutoff_Hz: NDArray[np.float64]
+
+    @property
+    def n_bands(self) -> int:
+        """B."""
+        return int(self.onset_Hz.shape[1])
+
+
+def cell_apparent_mass_kg(chain: Chain, i: int, omega_rad_s: float) -> float:
+    """DEM apparent mass of cylinder index ``i`` (0-based): m0 + sum m_j w_j^2/(w_j^2 - w^2)."""
+    wj2 = chain.omega_res_rad_s[i] ** 2
+    return float(chain.m0_kg[i] + np.sum(chain.m_res_kg[i] * wj2 / (wj2 - omega_rad_s**2)))
+
+
+def _cell_mass(chain: Chain, i: int, w: float) -> float:
+    return cell_apparent_mass_kg(chain, i, w)
+
+
+def _beam_mass(length_m: float, chain: Chain, theory: str, w: float) -> float:
+    return apparent_mass_kg(w, length_m, chain.diameter_m, chain.material, theory)
+
+
+def _edges(
+    mass_fn: Callable[[float], float], poles: NDArray[np.float64], k4: float, n_bands: int
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    onset = np.zeros(n_bands)
+    cutoff = np.zeros(n_bands)
+    for b in range(n_bands):
+        lo = 0.0 if b == 0 else float(poles[b - 1])
+        hi = float(poles[b]) if b < len(poles) else (lo * 4.0 + 1.0)
+        eps = 1e-9 * max(hi, 1.0)
+        a = lo + eps if b > 0 else 1e-6 * hi
+        z = hi - eps
+        if b > 0:
+            onset[b] = brentq(mass_fn, a, z, xtol=1e-12, rtol=1e-13)
+        g = lambda w: w * w * mass_fn(w) - k4  # noqa: E731
+        if b >= len(poles):
+            while g(z) < 0.0:
+                z *= 2.0
+        cutoff[b] = brentq(g, a, z, xtol=1e-12, rtol=1e-13)
+    return onset / (2.0 * math.pi), cutoff / (2.0 * math.pi)
+
+
+def quasi_bands(chain: Chain, n_bands: int = 3) -> Bands:
+    """Onset/cutoff edges (Hz) of the first ``n_bands`` bands of every cylinder (DEM cell).
+
+    ``n_bands`` may be at most J + 1 (J resonators per cylinder).
+    """
+    if not 1 <= n_bands <= chain.n_modes + 1:
+        raise ValueError(f"n_bands must be in 1..{chain.n_modes + 1} for J = {chain.n_modes}")
+    onset = np.empty((chain.n, n_bands))
+    cutoff = np.empty((chain.n, n_bands))
+    for i in range(chain.n):
+        onset[i], cutoff[i] = _edges(
+            partial(_cell_mass, chain, i),
+            chain.omega_res_rad_s[i],
+            4.0 * chain.K_lin,
+            n_bands,
+        )
+    return Bands(onset, cutoff)
+
+
+def continuum_bands(chain: Chain, n_bands: int = 3) -> Bands:
+    """The same edges from the exact (continuum) beam apparent mass, as a check of the cell."""
+    onset = np.empty((chain.n, n_bands))
+    cutoff = np.empty((chain.n, n_bands))
+    theory = chain.spec.beam_theory
+    for i in range(chain.n):
+        L = float(chain.lengths_m[i])
+        poles = beam_modes(L, chain.diameter_m, chain.material, n_bands, theory).omega_rad_s
+        onset[i], cutoff[i] = _edges(
+            partial(_beam_mass, L, chain, theory),
+            poles,
+            4.0 * chain.K_lin,
+            n_bands,
+        )
+    return Bands(onset, cutoff)

@@ -1,0 +1,119 @@
+"""A built chain: every cylinder's discrete element (primary mass + resonators) and the contacts."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from sim_backend.dem.beam import beam_modes
+from sim_backend.dem.contact import hertz_beta, linear_stiffness, static_overlap
+from sim_backend.dem.material import Material
+from sim_backend.dem.spec import ChainSpec
+
+__all__ = ["Chain", "build_chain"]
+
+
+@dataclass(frozen=True, eq=False)
+class Chain:
+    """The chain in SI units (index 0 = cylinder #1).
+
+    Attributes
+    ----------
+    spec: the :class:`ChainSpec` it was built from.
+    n: number of cylinders N.
+    n_modes: resonators per cylinder J.
+    lengths_m: [N] cylinder lengths (m).
+    diameter_m: cylinder diameter (m).
+    f0_N: static preload F0 (N).
+    beta_c: Hertz coefficient (N/m^1.5).
+    delta0_m: static overlap of every contact (m).
+    K_lin: linearised contact stiffness (N/m).
+    mass_kg: [N] total cylinder masses (kg).
+    m0_kg: [N] primary (residual) masses (kg).
+    m_res_kg: [N, J] resonator masses (kg).
+    k_res_N_per_m: [N, J] resonator stiffnesses (N/m).
+    omega_res_rad_s: [N, J] centre-clamped angular frequencies (rad/s).
+    resonator_damping_ratio: modal damping ratio of every resonator mode.
+    contact_damping_ratio: contact dashpot ratio, c = 2 zeta sqrt(K m0) per contact.
+    far_end: "wall" or "free".
+    material: the material.
+    """
+
+    spec: ChainSpec
+    n: int
+    n_modes: int
+    lengths_m: NDArray[np.float64]
+    diameter_m: float
+    f0_N: float
+    beta_c: float
+    delta0_m: float
+    K_lin: float
+    mass_kg: NDArray[np.float64]
+    m0_kg: NDArray[np.float64]
+    m_res_kg: NDArray[np.float64]
+    k_res_N_per_m: NDArray[np.float64]
+    omega_res_rad_s: NDArray[np.float64]
+    resonator_damping_ratio: float
+    contact_damping_ratio: float
+    far_end: str
+    material: Material
+
+    def contact_dashpot_Ns_per_m(self) -> NDArray[np.float64]:
+        """[N+1] dashpot coefficient (N s/m) of each contact: wall-#1, #1-#2, ..., #N-wall."""
+        m = np.concatenate([self.m0_kg[:1], self.m0_kg, self.m0_kg[-1:]])
+        m_pair = 0.5 * (m[:-1] + m[1:])
+        return 2.0 * self.contact_damping_ratio * np.sqrt(self.K_lin * m_pair)
+
+
+_CACHE: dict[str, Chain] = {}
+
+
+def build_chain(spec: ChainSpec) -> Chain:
+    """Build (and cache, keyed by the spec's content) the discrete-element chain of ``spec``."""
+    key = spec.model_dump_json()
+    hit = _CACHE.get(key)
+    if hit is not None:
+        return hit
+    material = spec.material.to_material()
+    lengths = spec.lengths_m()
+    n = len(lengths)
+    J = spec.n_modes
+    mass = np.empty(n)
+    m0 = np.empty(n)
+    mres = np.empty((n, J))
+    omega = np.empty((n, J))
+    for i, L in enumerate(lengths):
+        modes = beam_modes(float(L), spec.diameter, material, J, spec.beam_theory)
+        mass[i] = modes.mass_kg
+        m0[i] = modes.residual_mass_kg
+        mres[i] = modes.modal_mass_kg
+        omega[i] = modes.omega_rad_s
+    beta = hertz_beta(spec.diameter, material)
+    chain = Chain(
+        spec=spec,
+        n=n,
+        n_modes=J,
+        lengths_m=lengths,
+        diameter_m=spec.diameter,
+        f0_N=spec.preload,
+        beta_c=beta,
+        delta0_m=static_overlap(spec.preload, beta),
+        K_lin=linear_stiffness(spec.preload, beta),
+        mass_kg=mass,
+        m0_kg=m0,
+        m_res_kg=mres,
+        k_res_N_per_m=mres * omega**2,
+        omega_res_rad_s=omega,
+        resonator_damping_ratio=spec.damping.resonator_ratio,
+        contact_damping_ratio=spec.damping.contact_ratio,
+        far_end=spec.far_end,
+        material=material,
+    )
+    for arr in (lengths, mass, m0, mres, omega, chain.k_res_N_per_m):
+        arr.setflags(write=False)
+    if len(_CACHE) > 256:
+        _CACHE.clear()
+    _CACHE[key] = chain
+    return chain

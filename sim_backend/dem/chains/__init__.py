@@ -1,0 +1,1 @@
+"""Shipped chain files (YAML)."""

@@ -1,0 +1,312 @@
+"""Time-domain simulation of a batch of drives on one chain: :func:`simulate`."""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.linalg import eigh
+
+from sim_backend.dem.chain import Chain
+from sim_backend.dem.drive import Drive
+from sim_backend.dem.kernel import drift_coefficients, run_batch
+
+__all__ = [
+    "DEFAULT_DT_S",
+    "DEFAULT_INTEGRATOR",
+    "DEFAULT_SAMPLE_RATE_HZ",
+    "INTEGRATORS",
+    "BlockModes",
+    "SimResult",
+    "block_modes",
+    "simulate",
+]
+
+_W1 = 1.0 / (2.0 - 2.0 ** (1.0 / 3.0))
+_W0 = 1.0 - 2.0 * _W1
+_Z1 = 1.0 / (2.0 - 2.0 ** (1.0 / 5.0))
+_Z0 = 1.0 - 2.0 * _Z1
+_P = 1.0 / (4.0 - 4.0 ** (1.0 / 3.0))
+
+
+def _from_strang(gamma: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """(drift weights a [m+1], kick weights b [m]) of a composition of Strang steps gamma."""
+    m = len(gamma)
+    a = [0.5 * gamma[0]]
+    a += [0.5 * (gamma[k - 1] + gamma[k]) for k in range(1, m)]
+    a += [0.5 * gamma[-1]]
+    return tuple(a), tuple(gamma)
+
+
+# Blanes & Moan, J. Comput. Appl. Math. 142 (2002) 313, Table 2: S6, order 4, 6 kicks
+_BM_A = (0.0792036964311957, 0.353172906049774, -0.0420650803577195)
+_BM_B = (0.209515106613362, -0.143851773179818)
+_BM4 = (
+    (*_BM_A, 1.0 - 2.0 * sum(_BM_A), *_BM_A[::-1]),
+    (*_BM_B, 0.5 - sum(_BM_B), 0.5 - sum(_BM_B), *_BM_B[::-1]),
+)
+
+#: symmetric splittings D(a0 h) K(b0 h) D(a1 h) ... K(b_{m-1} h) D(a_m h):
+#: name -> (order, drift weights a, kick weights b)
+INTEGRATORS: dict[str, tuple[int, tuple[float, ...], tuple[float, ...]]] = {
+    "strang": (2, *_from_strang((1.0,))),
+    "yoshida4": (4, *_from_strang((_W1, _W0, _W1))),
+    "suzuki4": (4, *_from_strang((_P, _P, 1.0 - 4.0 * _P, _P, _P))),
+    "blanes-moan4": (4, *_BM4),
+    "yoshida6": (6, *_from_strang(tuple(z * w for z in (_Z1, _Z0, _Z1) for w in (_W1, _W0, _W1)))),
+}
+DEFAULT_INTEGRATOR = "blanes-moan4"
+#: default step (s) of each integrator (chosen from benchmarks/dem_sweep: error <= 1e-4)
+DEFAULT_DT_S: dict[str, float] = {
+    "strang": 0.1e-6,
+    "yoshida4": 1.0e-6,
+    "suzuki4": 1.0e-6,
+    "blanes-moan4": 2.0e-6,
+    "yoshida6": 2.0e-6,
+}
+#: the default steps hold for block modes up to this frequency (the default chain's top block
+#: mode is 82 kHz); stiffer blocks (more modes, shorter cylinders) get proportionally smaller steps
+DEFAULT_DT_TOP_HZ = 85.0e3
+DEFAULT_SAMPLE_RATE_HZ = 500.0e3
+
+# numba's default (workqueue) threading layer must not be entered from two threads at once
+_KERNEL_LOCK = threading.Lock()
+
+
+@dataclass(frozen=True)
+class SimResult:
+    """Output of :func:`simulate`.
+
+    Attributes
+    ----------
+    time_s: [S] sample times (s), 0 = trigger.
+    velocity: [R, C, S] primary-mass velocity (m/s) along the chain axis, positive from
+        cylinder #1 towards #N, for drive r and recorded cylinder c.
+    displacement: [R, C, S] primary-mass displacement (m), same sign convention.
+    drive: [R, S] the applied drive (actuator displacement into the chain in m, or force in N).
+    cylinders: [C] 1-based cylinder numbers recorded.
+    meta: integrator, order, dt_s, sample_rate_Hz, wall_s, energy (per drive: input work J,
+        energy residual relative to the input work; meaningful with damping off).
+    """
+
+    time_s: NDArray[np.float64]
+    velocity: NDArray[np.float64]
+    displacement: NDArray[np.float64]
+    drive: NDArray[np.float64]
+    cylinders: NDArray[np.int32]
+    meta: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class BlockModes:
+    """Modes of every cylinder's free block (primary + resonators), index 0 = rigid translation.
+
+    phi0: [N, J+1] primary-mass component of the mass-normalised modes (1/sqrt(kg)).
+    omega: [N, J+1] angular frequencies (rad/s), omega[:, 0] = 0.
+    """
+
+    phi0: NDArray[np.float64]
+    omega: NDArray[np.float64]
+
+
+def block_modes(chain: Chain) -> BlockModes:
+    """Eigen-decompose each cylinder's (J+1)-DOF block (no contacts)."""
+    N, J = chain.n, chain.n_modes
+    phi0 = np.empty((N, J + 1))
+    omega = np.empty((N, J + 1))
+    for i in range(N):
+        k = chain.k_res_N_per_m[i]
+        M = np.diag(np.concatenate([[chain.m0_kg[i]], chain.m_res_kg[i]]))
+        Kb = np.zeros((J + 1, J + 1))
+        Kb[0, 0] = k.sum()
+        Kb[0, 1:] = -k
+        Kb[1:, 0] = -k
+        Kb[1:, 1:] = np.diag(k)
+        w2, vec = eigh(Kb, M)
+        order = np.argsort(w2)
+        w2, vec = w2[order], vec[:, order]
+        w2[0] = 0.0
+        vec[:, 0] = 1.0 / math.sqrt(chain.mass_kg[i])
+        phi0[i] = vec[0]
+        omega[i] = np.sqrt(np.maximum(w2, 0.0))
+    return BlockModes(phi0, omega)
+
+
+def _scheme(a: Sequence[float]) -> tuple[list[float], list[int], int]:
+    """Distinct drift sizes, the kind of each drift a_k, and the kind of the merged a_m + a_0."""
+    sizes = [*a, a[-1] + a[0]]
+    distinct: list[float] = []
+    idx: list[int] = []
+    for sz in sizes:
+        for j, d in enumerate(distinct):
+            if abs(d - sz) < 1e-14:
+                idx.append(j)
+                break
+        else:
+            distinct.append(sz)
+            idx.append(len(distinct) - 1)
+    return distinct, idx[:-1], idx[-1]
+
+
+def _lanes(orient: NDArray[np.int64]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """Group trajectories by orientation into chunks of W lanes (padding: -1)."""
+    R = orient.size
+    W = 8 if R >= 16 else 4 if R >= 4 else 1
+    chunks: list[list[int]] = []
+    orients: list[int] = []
+    for o in (0, 1):
+        idx = [int(r) for r in np.flatnonzero(orient == o)]
+        for start in range(0, len(idx), W):
+            part = idx[start : start + W]
+            chunks.append(part + [-1] * (W - len(part)))
+            orients.append(o)
+    return np.asarray(chunks, dtype=np.int64), np.asarray(orients, dtype=np.int64)
+
+
+def _cylinder_indices(chain: Chain, cylinders: Sequence[int] | None) -> NDArray[np.int64]:
+    if cylinders is None:
+        return np.arange(chain.n, dtype=np.int64)
+    idx = np.asarray(list(cylinders), dtype=np.int64)
+    if idx.ndim != 1 or idx.size == 0 or idx.min() < 1 or idx.max() > chain.n:
+        raise ValueError(f"cylinders must be 1-based numbers in 1..{chain.n}")
+    return idx - 1
+
+
+def simulate(
+    chain: Chain,
+    drives: Sequence[Drive],
+    *,
+    duration_s: float,
+    sample_rate_Hz: float = DEFAULT_SAMPLE_RATE_HZ,
+    cylinders: Sequence[int] | None = None,
+    integrator: str = "default",
+    dt_s: float | None = None,
+) -> SimResult:
+    """Simulate every drive of ``drives`` on ``chain`` (one compiled batch, parallel over drives).
+
+    Parameters
+    ----------
+    chain: the built chain.
+    drives: R drives (directions and kinds may be mixed).
+    duration_s: recorded window (s) from the trigger; S = floor(duration * rate) + 1 samples.
+    sample_rate_Hz: record rate (Hz); the step is the largest ``1/(rate n) <= dt_s``.
+    cylinders: 1-based cylinder numbers to record (default: all).
+    integrator: a key of :data:`INTEGRATORS` or ``"default"`` (:data:`DEFAULT_INTEGRATOR`).
+    dt_s: the integrator step (s); default :data:`DEFAULT_DT_S` of the integrator, scaled down by
+        ``DEFAULT_DT_TOP_HZ / f_top`` when the stiffest block mode ``f_top`` is above it.
+    """
+    t_wall = time.perf_counter()
+    name = DEFAULT_INTEGRATOR if integrator == "default" else integrator
+    if name not in INTEGRATORS:
+        raise ValueError(f"unknown integrator {integrator!r}; choose from {sorted(INTEGRATORS)}")
+    if not (math.isfinite(duration_s) and duration_s > 0):
+        raise ValueError(f"duration_s must be > 0, got {duration_s!r}")
+    if not (math.isfinite(sample_rate_Hz) and sample_rate_Hz > 0):
+        raise ValueError(f"sample_rate_Hz must be > 0, got {sample_rate_Hz!r}")
+    if len(drives) == 0:
+        raise ValueError("simulate needs at least one drive")
+    order, a_w, b_w = INTEGRATORS[name]
+    modes = block_modes(chain)
+    if dt_s is None:
+        f_top = float(modes.omega.max()) / (2.0 * math.pi)
+        dt_req = DEFAULT_DT_S[name] * min(1.0, DEFAULT_DT_TOP_HZ / f_top)
+    else:
+        dt_req = float(dt_s)
+    if not (math.isfinite(dt_req) and dt_req > 0):
+        raise ValueError(f"dt_s must be > 0, got {dt_s!r}")
+    period = 1.0 / sample_rate_Hz
+    n_sub = max(1, math.ceil(period / dt_req - 1e-9))
+    h = period / n_sub
+    n_samples = math.floor(duration_s * sample_rate_Hz + 1e-9) + 1
+
+    N, K = modes.phi0.shape
+    zeta = np.full((N, K), chain.resonator_damping_ratio)
+    zeta[:, 0] = 0.0
+    sizes, seq, merge = _scheme(a_w)
+    drift = np.stack([drift_coefficients(modes.omega, zeta, s * h) for s in sizes])
+    dash = chain.contact_dashpot_Ns_per_m()
+    phi0 = np.stack([modes.phi0, modes.phi0[::-1]])
+    omega = np.stack([modes.omega, modes.omega[::-1]])
+    drift2 = np.stack([drift, drift[:, ::-1]])
+    chi = dash / chain.f0_N
+    chi2 = np.stack([chi, chi[::-1]])
+    rec = _cylinder_indices(chain, cylinders)
+    rec_idx = np.stack([rec, chain.n - 1 - rec])
+
+    R = len(drives)
+    orient = np.array([0 if d.direction == "ltr" else 1 for d in drives], dtype=np.int64)
+    dkind = np.array([0 if d.kind == "displacement" else 1 for d in drives], dtype=np.int64)
+    src = np.array([0 if d.burst is not None else 1 for d in drives], dtype=np.int64)
+    prm = np.zeros((R, 8))
+    lmax = max([2] + [np.asarray(d.waveform[0]).size for d in drives if d.waveform is not None])
+    tables = np.zeros((R, lmax))
+    n_table = np.zeros(R, dtype=np.int64)
+    for r, d in enumerate(drives):
+        prm[r, 0] = d.amplitude
+        prm[r, 6] = d.delay_s
+        if d.burst is not None:
+            b = d.burst
+            T = b.duration_s
+            sig = b.sigma_s
+            prm[r, 1:6] = (
+                b.f_center_Hz,
+                T,
+                sig,
+                0.5 * T,
+                math.exp(-((0.5 * T) ** 2) / (2 * sig**2)),
+            )
+        else:
+            assert d.waveform is not None
+            samples = np.asarray(d.waveform[0], dtype=np.float64)
+            tables[r, : samples.size] = samples
+            n_table[r] = samples.size
+            prm[r, 7] = d.waveform[1]
+    C = rec.size
+    vel = np.empty((R, C, n_samples))
+    disp = np.empty((R, C, n_samples))
+    drv = np.empty((R, n_samples))
+    energy = np.zeros((R, 3))
+    lane_traj, chunk_orient = _lanes(orient)
+    with _KERNEL_LOCK:
+        run_batch(
+            phi0, omega, drift2, chi2, np.sum(phi0**2, axis=2), lane_traj, chunk_orient,
+            dkind, src, prm, tables, n_table,
+            np.asarray(b_w, dtype=np.float64), np.asarray(a_w, dtype=np.float64),
+            np.asarray(seq, dtype=np.int64), int(merge),
+            h, n_sub, n_samples, chain.beta_c, chain.delta0_m, chain.f0_N,
+            1 if chain.far_end == "wall" else 0, rec_idx, vel, disp, drv, energy,
+        )  # fmt: skip
+    flip = orient == 1
+    vel[flip] *= -1.0
+    disp[flip] *= -1.0
+    work = energy[:, 2]
+    gain = energy[:, 1] - energy[:, 0]
+    scale = np.maximum(np.abs(work), 1e-300)
+    undamped = chain.resonator_damping_ratio == 0.0 and chain.contact_damping_ratio == 0.0
+    meta: dict[str, Any] = {
+        "integrator": name,
+        "order": order,
+        "dt_s": h,
+        "substeps_per_sample": n_sub,
+        "sample_rate_Hz": sample_rate_Hz,
+        "damped": not undamped,
+        "input_work_J": work,
+        "energy_gain_J": gain,
+        "energy_residual_rel": (gain - work) / scale,
+        "finite": bool(np.all(np.isfinite(vel))),
+        "wall_s": time.perf_counter() - t_wall,
+    }
+    return SimResult(
+        time_s=np.arange(n_samples) / sample_rate_Hz,
+        velocity=vel,
+        displacement=disp,
+        drive=drv,
+        cylinders=(rec + 1).astype(np.int32),
+        meta=meta,
+    )

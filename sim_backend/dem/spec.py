@@ -1,0 +1,205 @@
+"""The chain file (YAML): a pydantic model whose quantities carry units.
+
+Example (the default chain, ``sim_backend/dem/chains/default.yaml``)::
+
+    n_cylinders: 31
+    length_first: 90 mm      # cylinder #1 (the LTR entry)
+    length_last: 110 mm      # cylinder #N; lengths graded linearly in between
+    diameter: 13.6 mm
+    preload: 5 N
+    n_modes: 3
+    beam_theory: timoshenko
+    material: {youngs_modulus: 72 GPa, density: 2200 kg/m^3, poisson_ratio: 0.17}
+    far_end: wall            # wall (rigid Hertz wall) | free (constant preload force)
+    damping: {resonator_ratio: 0.002, contact_ratio: 0.005}
+
+``lengths: [90 mm, 91 mm, ...]`` may replace ``n_cylinders``/``length_first``/``length_last``.
+A bad file raises :class:`ChainFileError` with one line naming the file and the field.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import yaml
+from numpy.typing import NDArray
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+from instruments.units import Density, Force, Length, Pressure
+from sim_backend.dem.material import Material
+
+__all__ = [
+    "ChainFileError",
+    "ChainSpec",
+    "DampingSpec",
+    "MaterialSpec",
+    "default_chain_path",
+    "default_chain_spec",
+    "load_chain_spec",
+]
+
+
+class ChainFileError(ValueError):
+    """A chain file or chain setting that cannot be used (one line, names file and field)."""
+
+
+class MaterialSpec(BaseModel):
+    """Material of the cylinders (quantities with units in YAML)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    name: str = "fused quartz"
+    youngs_modulus: Pressure = 72.0e9
+    density: Density = 2200.0
+    poisson_ratio: float = 0.17
+
+    @field_validator("youngs_modulus", "density")
+    @classmethod
+    def _positive(cls, v: float) -> float:
+        if not v > 0:
+            raise ValueError("must be > 0")
+        return v
+
+    @field_validator("poisson_ratio")
+    @classmethod
+    def _poisson(cls, v: float) -> float:
+        if not -1.0 < v < 0.5:
+            raise ValueError("must be in (-1, 0.5)")
+        return v
+
+    def to_material(self) -> Material:
+        """The SI :class:`Material`."""
+        return Material(self.name, self.youngs_modulus, self.density, self.poisson_ratio)
+
+
+class DampingSpec(BaseModel):
+    """Damping ratios (dimensionless): modal damping of every resonator mode, contact dashpots."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    resonator_ratio: float = Field(default=2.0e-3, ge=0.0, lt=1.0)
+    contact_ratio: float = Field(default=5.0e-3, ge=0.0, lt=1.0)
+
+
+class ChainSpec(BaseModel):
+    """A graded cylinder chain. SI floats inside; YAML values carry units."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    n_cylinders: int | None = Field(default=None, ge=2, le=10_000)
+    length_first: Length | None = None
+    length_last: Length | None = None
+    lengths: tuple[Length, ...] | None = None
+    diameter: Length = 13.6e-3
+    preload: Force = 5.0
+    n_modes: int = Field(default=3, ge=1, le=12)
+    beam_theory: Literal["timoshenko", "euler-bernoulli"] = "timoshenko"
+    material: MaterialSpec = MaterialSpec()
+    far_end: Literal["wall", "free"] = "wall"
+    damping: DampingSpec = DampingSpec()
+
+    @field_validator("length_first", "length_last", "diameter", "preload")
+    @classmethod
+    def _positive(cls, v: float | None) -> float | None:
+        if v is not None and not v > 0:
+            raise ValueError("must be > 0")
+        return v
+
+    @field_validator("lengths")
+    @classmethod
+    def _lengths_positive(cls, v: tuple[float, ...] | None) -> tuple[float, ...] | None:
+        if v is not None:
+            if len(v) < 2:
+                raise ValueError("needs at least 2 cylinders")
+            for i, x in enumerate(v):
+                if not x > 0:
+                    raise ValueError(f"length of cylinder #{i + 1} must be > 0")
+        return v
+
+    @model_validator(mode="after")
+    def _one_geometry(self) -> ChainSpec:
+        graded = (self.n_cylinders, self.length_first, self.length_last)
+        if self.lengths is not None:
+            if any(x is not None for x in graded):
+                raise ValueError("give either lengths or n_cylinders/length_first/length_last")
+        elif any(x is None for x in graded):
+            raise ValueError("give lengths, or all of n_cylinders, length_first, length_last")
+        return self
+
+    def lengths_m(self) -> NDArray[np.float64]:
+        """[N] cylinder lengths in m, #1 first."""
+        if self.lengths is not None:
+            return np.asarray(self.lengths, dtype=np.float64)
+        assert self.n_cylinders is not None
+        assert self.length_first is not None and self.length_last is not None
+        return np.linspace(self.length_first, self.length_last, self.n_cylinders)
+
+    @property
+    def n(self) -> int:
+        """Number of cylinders."""
+        return len(self.lengths_m())
+
+    def to_yaml(self) -> str:
+        """The spec as a chain file (explicit lengths, quantities with units)."""
+        data: dict[str, Any] = {
+            "lengths": [f"{x * 1e3:.9g} mm" for x in self.lengths_m()],
+            "diameter": f"{self.diameter * 1e3:.9g} mm",
+            "preload": f"{self.preload:.9g} N",
+            "n_modes": self.n_modes,
+            "beam_theory": self.beam_theory,
+            "material": {
+                "name": self.material.name,
+                "youngs_modulus": f"{self.material.youngs_modulus / 1e9:.9g} GPa",
+                "density": f"{self.material.density:.9g} kg/m^3",
+                "poisson_ratio": self.material.poisson_ratio,
+            },
+            "far_end": self.far_end,
+            "damping": self.damping.model_dump(),
+        }
+        return yaml.safe_dump(data, sort_keys=False)
+
+
+def _first_error(exc: ValidationError) -> str:
+    err = exc.errors()[0]
+    loc = ".".join(str(p) for p in err.get("loc", ())) or "(top level)"
+    msg = str(err.get("msg", "invalid"))
+    msg = msg.removeprefix("Value error, ")
+    if err.get("type") == "extra_forbidden":
+        msg = "unknown key"
+    return f"{loc}: {msg}"
+
+
+def chain_spec_from_dict(data: Any, source: str = "chain") -> ChainSpec:
+    """Validate a mapping (as read from YAML) into a :class:`ChainSpec`."""
+    if not isinstance(data, dict):
+        raise ChainFileError(f"{source}: expected a mapping of chain settings")
+    try:
+        return ChainSpec.model_validate(data)
+    except ValidationError as exc:
+        raise ChainFileError(f"{source}: {_first_error(exc)}") from None
+
+
+def load_chain_spec(path: str | Path) -> ChainSpec:
+    """Read a chain file (YAML). Raises :class:`ChainFileError` (one line: file and field)."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ChainFileError(f"{p}: cannot read chain file ({exc.strerror})") from None
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise ChainFileError(f"{p}: not valid YAML ({str(exc).splitlines()[0]})") from None
+    return chain_spec_from_dict(data, str(p))
+
+
+def default_chain_path() -> Path:
+    """Path of the shipped default chain file."""
+    return Path(__file__).with_name("chains") / "default.yaml"
+
+
+def default_chain_spec() -> ChainSpec:
+    """The paper's chain: 31 fused-quartz cylinders 90 -> 110 mm, d = 13.6 mm, F0 = 5 N, J = 3."""
+    return load_chain_spec(default_chain_path())

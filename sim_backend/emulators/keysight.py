@@ -1,0 +1,354 @@
+"""Emulated Keysight 33500B/33600A: the SCPI subset the driver uses, with a real error queue.
+
+State the simulated world reads: :attr:`KeysightEmulator.channels` (``ChannelState`` per channel:
+normalised waveform samples ``[n]``, arb sample rate, amplitude Vpp, offset, load, output,
+burst and trigger settings). Hooks: :attr:`trigger_hooks` (called with the tuple of channels
+that fire on ``*TRG``), :attr:`responsive` (False: stops answering), :meth:`push_error`.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from instruments.transport.block import parse_block
+
+__all__ = ["ChannelState", "KeysightEmulator", "scpi_short"]
+
+IDN = "Keysight Technologies,33522B,MY00000000,4.00-1.19-2.00-58-00"
+MAX_HIGHZ_VPP = 20.0
+MAX_SRATE = 160.0e6
+QUEUE_LEN = 20
+_VOWELS = set("AEIOU")
+_NUM = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$")
+
+
+def scpi_short(token: str) -> str:
+    """SCPI short form of one header node (``VOLTage`` -> ``VOLT``, ``ERRor`` -> ``ERR``)."""
+    t = token.upper()
+    if len(t) <= 4:
+        return t
+    return t[:3] if t[3] in _VOWELS else t[:4]
+
+
+class ScpiError(Exception):
+    def __init__(self, code: int, message: str) -> None:
+        super().__init__(f"{code},{message}")
+        self.code = code
+        self.message = message
+
+
+@dataclass
+class ChannelState:
+    """One output channel (SI units; ``waveform`` normalised to +/-1)."""
+
+    function: str = "SIN"
+    arb_name: str | None = None
+    waveform: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
+    sample_rate_Hz: float = 40.0e3
+    amplitude_Vpp: float = 0.1
+    offset_V: float = 0.0
+    load_ohm: float = 50.0
+    output_on: bool = False
+    limit_high_V: float = 5.0
+    limit_low_V: float = -5.0
+    limit_on: bool = False
+    burst_mode: str = "TRIG"
+    burst_cycles: int = 1
+    burst_on: bool = False
+    trigger_source: str = "IMM"
+
+    @property
+    def peak_V(self) -> float:
+        return 0.5 * self.amplitude_Vpp + abs(self.offset_V)
+
+
+class KeysightEmulator:
+    """SCPI emulator; ``handle(message)`` returns the reply of a query, else None."""
+
+    def __init__(self, n_channels: int = 2) -> None:
+        self.responsive = True
+        self.channels: dict[int, ChannelState] = {
+            n: ChannelState() for n in range(1, n_channels + 1)
+        }
+        self.volatile: dict[int, dict[str, NDArray[np.float64]]] = {n: {} for n in self.channels}
+        self.byte_order = "NORM"
+        self.errors: deque[tuple[int, str]] = deque()
+        self.trigger_out_source = 1
+        self.trigger_out_on = False
+        self.trigger_hooks: list[Callable[[tuple[int, ...]], None]] = []
+        self.n_triggers = 0
+        self.commands: list[str] = []
+
+    # --- hooks for the world ------------------------------------------------------------
+    def push_error(self, code: int, message: str) -> None:
+        """Queue an SCPI error (fault injection); -350 on overflow like the instrument."""
+        if len(self.errors) >= QUEUE_LEN:
+            self.errors[-1] = (-350, "Queue overflow")
+        else:
+            self.errors.append((code, message))
+
+    def armed_channels(self) -> tuple[int, ...]:
+        """Channels that fire on a bus trigger (burst on, trigger source BUS)."""
+        return tuple(
+            n for n, c in self.channels.items() if c.burst_on and c.trigger_source == "BUS"
+        )
+
+    # --- wire ---------------------------------------------------------------------------
+    def handle(self, message: bytes) -> str | None:
+        block: bytes | None = None
+        i = message.find(b"#")
+        if i >= 0 and b"DATA" in message[:i].upper():
+            try:
+                block, rest = parse_block(message[i:])
+            except ValueError:
+                self.push_error(-161, "Invalid block data")
+                return None
+            if rest.strip():
+                self.push_error(-161, "Invalid block data")
+                return None
+            text = message[:i].decode("ascii", "replace")
+        else:
+            text = message.decode("ascii", "replace")
+        self.commands.append(text.strip())
+        replies = []
+        for part in text.split(";") if block is None else [text]:
+            part = part.strip()
+            if not part:
+                continue
+            try:
+                reply = self._command(part, block)
+            except ScpiError as exc:
+                self.push_error(exc.code, exc.message)
+                reply = None
+            if reply is not None:
+                replies.append(reply)
+        return ";".join(replies) if replies else None
+
+    def _command(self, text: str, block: bytes | None) -> str | None:
+        header, _, arg = text.partition(" ")
+        arg = arg.strip()
+        query = header.endswith("?")
+        header = header.rstrip("?")
+        if header.startswith("*"):
+            return self._common(header.upper(), query)
+        nodes = [n for n in header.lstrip(":").split(":") if n]
+        if not nodes:
+            raise ScpiError(-113, "Undefined header")
+        channel = 1
+        short: list[str] = []
+        for k, node in enumerate(nodes):
+            m = re.fullmatch(r"([A-Za-z]+)(\d*)", node)
+            if m is None:
+                raise ScpiError(-113, "Undefined header")
+            if m.group(2):
+                if k > 0 or scpi_short(m.group(1)) not in ("SOUR", "OUTP", "TRIG"):
+                    raise ScpiError(-113, "Undefined header")
+                channel = int(m.group(2))
+            short.append(scpi_short(m.group(1)))
+        if channel not in self.channels:
+            raise ScpiError(-114, "Header suffix out of range")
+        if short[0] == "SOUR":
+            short = short[1:]
+        key = ":".join(short)
+        ch = self.channels[channel]
+        return self._dispatch(key, arg, query, channel, ch, block)
+
+    def _common(self, header: str, query: bool) -> str | None:
+        if header == "*IDN" and query:
+            return IDN
+        if header == "*OPC" and query:
+            return "1"
+        if header == "*TRG":
+            fired = self.armed_channels()
+            self.n_triggers += 1
+            for hook in list(self.trigger_hooks):
+                hook(fired)
+            return None
+        if header == "*RST":
+            self.__init__(len(self.channels))  # type: ignore[misc]
+            return None
+        if header == "*CLS":
+            self.errors.clear()
+            return None
+        raise ScpiError(-113, "Undefined header")
+
+    def _dispatch(
+        self, key: str, arg: str, query: bool, n: int, ch: ChannelState, block: bytes | None
+    ) -> str | None:
+        if key == "SYST:ERR" and query:
+            if not self.errors:
+                return '+0,"No error"'
+            code, msg = self.errors.popleft()
+            return f'{code:+d},"{msg}"'
+        if key == "FORM:BORD":
+            if query:
+                return self.byte_order
+            v = arg.upper()
+            if v not in ("NORM", "NORMAL", "SWAP", "SWAPPED"):
+                raise ScpiError(-224, "Illegal parameter value")
+            self.byte_order = v[:4]
+            return None
+        if key == "DATA:VOL:CLE":
+            self.volatile[n].clear()
+            return None
+        if key == "DATA:ARB:DAC":
+            self._arb_dac(n, arg, block)
+            return None
+        if key == "FUNC":
+            if query:
+                return ch.function
+            v = scpi_short(arg)
+            if v not in ("SIN", "SQU", "RAMP", "PULS", "NOIS", "DC", "ARB", "PRBS", "TRI"):
+                raise ScpiError(-224, "Illegal parameter value")
+            ch.function = v
+            return None
+        if key == "FUNC:ARB":
+            if query:
+                return f'"{ch.arb_name}"'
+            name = arg.strip('"').upper()
+            if name not in self.volatile[n]:
+                raise ScpiError(-224, "Illegal parameter value;waveform not in volatile memory")
+            ch.arb_name = name
+            ch.waveform = self.volatile[n][name]
+            return None
+        if key == "FUNC:ARB:SRAT":
+            if query:
+                return f"{ch.sample_rate_Hz:+.9E}"
+            x = self._number(arg)
+            if not 1e-6 <= x <= MAX_SRATE:
+                raise ScpiError(-222, "Data out of range")
+            ch.sample_rate_Hz = x
+            return None
+        if key == "OUTP":
+            if query:
+                return "1" if ch.output_on else "0"
+            ch.output_on = self._bool(arg)
+            return None
+        if key == "OUTP:LOAD":
+            if query:
+                return "+9.9E+37" if math.isinf(ch.load_ohm) else f"{ch.load_ohm:+.6E}"
+            v = arg.upper()
+            ch.load_ohm = math.inf if v in ("INF", "INFINITY") else self._number(arg)
+            if not (math.isinf(ch.load_ohm) or 1 <= ch.load_ohm <= 10e3):
+                raise ScpiError(-222, "Data out of range")
+            return None
+        if key in ("VOLT", "VOLT:OFFS"):
+            if query:
+                return f"{ch.amplitude_Vpp if key == 'VOLT' else ch.offset_V:+.9E}"
+            x = self._number(arg)
+            amp = x if key == "VOLT" else ch.amplitude_Vpp
+            off = x if key == "VOLT:OFFS" else ch.offset_V
+            vmax = MAX_HIGHZ_VPP if math.isinf(ch.load_ohm) else MAX_HIGHZ_VPP / 2
+            if (key == "VOLT" and amp <= 0) or amp + 2 * abs(off) > vmax + 1e-9:
+                raise ScpiError(-222, "Data out of range")
+            if ch.limit_on and (
+                off + amp / 2 > ch.limit_high_V + 1e-9 or off - amp / 2 < ch.limit_low_V - 1e-9
+            ):
+                raise ScpiError(-221, "Settings conflict;amplitude exceeds voltage limits")
+            ch.amplitude_Vpp, ch.offset_V = amp, off
+            return None
+        if key in ("VOLT:LIM:HIGH", "VOLT:LIM:LOW"):
+            if query:
+                return f"{ch.limit_high_V if key.endswith('HIGH') else ch.limit_low_V:+.9E}"
+            x = self._number(arg)
+            if abs(x) > MAX_HIGHZ_VPP / 2:
+                raise ScpiError(-222, "Data out of range")
+            if key.endswith("HIGH"):
+                ch.limit_high_V = x
+            else:
+                ch.limit_low_V = x
+            return None
+        if key == "VOLT:LIM:STAT":
+            if query:
+                return "1" if ch.limit_on else "0"
+            ch.limit_on = self._bool(arg)
+            return None
+        if key == "BURS:MODE":
+            if query:
+                return ch.burst_mode
+            v = scpi_short(arg)
+            if v not in ("TRIG", "GAT"):
+                raise ScpiError(-224, "Illegal parameter value")
+            ch.burst_mode = v
+            return None
+        if key == "BURS:NCYC":
+            if query:
+                return f"{ch.burst_cycles:+.9E}"
+            x = self._number(arg)
+            if x != int(x) or not 1 <= x <= 1e8:
+                raise ScpiError(-222, "Data out of range")
+            ch.burst_cycles = int(x)
+            return None
+        if key == "BURS:STAT":
+            if query:
+                return "1" if ch.burst_on else "0"
+            ch.burst_on = self._bool(arg)
+            return None
+        if key == "TRIG:SOUR":
+            if query:
+                return ch.trigger_source
+            v = scpi_short(arg)
+            v = {"EXTE": "EXT", "IMME": "IMM"}.get(v, v)
+            if v not in ("BUS", "EXT", "IMM", "TIM"):
+                raise ScpiError(-224, "Illegal parameter value")
+            ch.trigger_source = v
+            return None
+        if key == "OUTP:TRIG:SOUR":
+            m = re.fullmatch(r"CH(\d)", arg.upper())
+            if query:
+                return f"CH{self.trigger_out_source}"
+            if m is None or int(m.group(1)) not in self.channels:
+                raise ScpiError(-224, "Illegal parameter value")
+            self.trigger_out_source = int(m.group(1))
+            return None
+        if key == "OUTP:TRIG:SLOP":
+            if scpi_short(arg) not in ("POS", "NEG"):
+                raise ScpiError(-224, "Illegal parameter value")
+            return None
+        if key == "OUTP:TRIG":
+            if query:
+                return "1" if self.trigger_out_on else "0"
+            self.trigger_out_on = self._bool(arg)
+            return None
+        raise ScpiError(-113, "Undefined header")
+
+    def _arb_dac(self, n: int, arg: str, block: bytes | None) -> None:
+        name = arg.rstrip(",").strip().strip('"').upper()
+        if not re.fullmatch(r"[A-Z][A-Z0-9_]{0,11}", name):
+            raise ScpiError(-224, "Illegal parameter value;bad arb name")
+        if block is None:
+            raise ScpiError(-109, "Missing parameter")
+        if len(block) % 2 or len(block) < 16:
+            raise ScpiError(-161, "Invalid block data")
+        dtype = "<i2" if self.byte_order == "SWAP" else ">i2"
+        codes = np.frombuffer(block, dtype=dtype).astype(np.float64)
+        if np.any(np.abs(codes) > 32767):
+            raise ScpiError(-222, "Data out of range")
+        self.volatile[n][name] = codes / 32767.0
+
+    @staticmethod
+    def _number(arg: str) -> float:
+        a = arg.strip().upper()
+        if a in ("MIN", "MAX", "DEF"):
+            raise ScpiError(-224, "Illegal parameter value")
+        if not a:
+            raise ScpiError(-109, "Missing parameter")
+        if not _NUM.match(a):
+            raise ScpiError(-104, "Data type error")
+        return float(a)
+
+    @staticmethod
+    def _bool(arg: str) -> bool:
+        a = arg.strip().upper()
+        if a in ("ON", "1"):
+            return True
+        if a in ("OFF", "0"):
+            return False
+        raise ScpiError(-224, "Illegal parameter value")

@@ -1,0 +1,81 @@
+"""A Transport whose other end is an emulator: the real drivers run on it unchanged."""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+from instruments.clock import Clock
+from instruments.errors import InstrumentError, InstrumentTimeout
+from instruments.transport.block import encode_block
+
+__all__ = ["Emulator", "SimTransport"]
+
+
+class Emulator(Protocol):
+    """An instrument emulator: one message in (bytes, termination stripped), reply or None."""
+
+    responsive: bool
+
+    def handle(self, message: bytes) -> str | None: ...
+
+
+class SimTransport:
+    """:class:`instruments.interfaces.Transport` on an :class:`Emulator`.
+
+    A query that gets no reply (emulator silent or not responsive) raises
+    :class:`InstrumentTimeout` after ``clock.sleep(timeout_s)`` (simulated time passes as it
+    would on the bench; any clock with ``now``/``sleep`` works, e.g. :class:`SimClock`).
+    """
+
+    def __init__(
+        self,
+        emulator: Emulator,
+        name: str = "sim",
+        timeout_s: float = 1.0,
+        clock: Clock | None = None,
+    ) -> None:
+        self.emulator = emulator
+        self.name = name
+        self.timeout_s = float(timeout_s)
+        self.clock = clock
+        self.closed = False
+        self._pending: list[str] = []
+        self.log: list[str] = []
+
+    def _send(self, message: bytes, what: str) -> str | None:
+        if self.closed:
+            raise InstrumentError(f"{self.name}: transport closed, cannot send {what!r}")
+        self.log.append(what)
+        if not self.emulator.responsive:
+            return None
+        return self.emulator.handle(message)
+
+    def _timeout(self, what: str) -> InstrumentTimeout:
+        if self.clock is not None:
+            self.clock.sleep(self.timeout_s)
+        return InstrumentTimeout(f"{self.name}: no reply to {what!r} within {self.timeout_s:g} s")
+
+    def write(self, command: str) -> None:
+        reply = self._send(command.encode("ascii"), command)
+        if reply is not None:
+            self._pending.append(reply)
+
+    def query(self, command: str) -> str:
+        self._pending.clear()
+        reply = self._send(command.encode("ascii"), command)
+        if reply is None:
+            raise self._timeout(command)
+        return reply
+
+    def write_block(self, header: str, data: bytes) -> None:
+        reply = self._send(header.encode("ascii") + encode_block(data), header)
+        if reply is not None:
+            self._pending.append(reply)
+
+    def read(self) -> str:
+        if self._pending and self.emulator.responsive:
+            return self._pending.pop(0)
+        raise self._timeout("read")
+
+    def close(self) -> None:
+        self.closed = True

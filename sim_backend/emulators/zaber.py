@@ -1,0 +1,159 @@
+"""Emulated Zaber axis (ASCII protocol): moves take simulated time on a shared :class:`SimClock`.
+
+State for the world: :meth:`ZaberEmulator.position_m` (at the clock's time), :attr:`homed`,
+:meth:`busy`. Faults: :meth:`stall` (stops the axis, flag FS), :meth:`lose_homing` (flag WR),
+:attr:`responsive`.
+"""
+
+from __future__ import annotations
+
+from instruments.clock import Clock
+
+__all__ = ["ZaberEmulator"]
+
+
+class ZaberEmulator:
+    """One device/axis. Positions in microsteps on the wire; ``microstep_m`` converts."""
+
+    def __init__(
+        self,
+        clock: Clock,
+        *,
+        device: int = 1,
+        axis: int = 1,
+        microstep_m: float = 0.49609375e-6,
+        travel_m: tuple[float, float] = (0.0, 0.5),
+        speed_m_per_s: float = 0.025,
+        home_position_m: float | None = None,
+    ) -> None:
+        self.clock = clock
+        self.device = device
+        self.axis = axis
+        self.microstep_m = microstep_m
+        self.limit_min = round(float(travel_m[0]) / microstep_m)
+        self.limit_max = round(float(travel_m[1]) / microstep_m)
+        self.maxspeed = round(float(speed_m_per_s) / microstep_m * 1.6384)
+        self.home_steps = (
+            self.limit_min
+            if home_position_m is None
+            else round(float(home_position_m) / microstep_m)
+        )
+        self.responsive = True
+        self.homed = False
+        self.flag = "WR"
+        self._start = (self.limit_min + self.limit_max) // 2
+        self._target = self._start
+        self._t0 = 0.0
+        self._t1 = 0.0
+        self.commands: list[str] = []
+
+    # --- state for the world ------------------------------------------------------------
+    def _steps_now(self) -> float:
+        t = self.clock.now()
+        if t >= self._t1 or self._t1 <= self._t0:
+            return float(self._target)
+        f = (t - self._t0) / (self._t1 - self._t0)
+        return self._start + f * (self._target - self._start)
+
+    def position_m(self) -> float:
+        """Carriage position (m) at the clock's current time."""
+        return self._steps_now() * self.microstep_m
+
+    def busy(self) -> bool:
+        return self.clock.now() < self._t1
+
+    # --- faults ---------------------------------------------------------------------------
+    def stall(self) -> None:
+        """Stop where it is now and raise the FS (stalled) flag."""
+        self._halt()
+        self.flag = "FS"
+
+    def lose_homing(self) -> None:
+        """Forget the reference position (flag WR)."""
+        self.homed = False
+        self.flag = "WR"
+
+    def _halt(self) -> None:
+        here = round(self._steps_now())
+        self._start = self._target = here
+        self._t0 = self._t1 = self.clock.now()
+
+    def _go(self, target: int) -> None:
+        here = self._steps_now()
+        speed = self.maxspeed / 1.6384  # microsteps/s
+        self._start = round(here)
+        self._target = target
+        self._t0 = self.clock.now()
+        self._t1 = self._t0 + abs(target - here) / max(speed, 1e-9)
+
+    # --- wire -----------------------------------------------------------------------------
+    def _reply(self, ok: bool, data: str) -> str:
+        status = "BUSY" if self.busy() else "IDLE"
+        return f"@{self.device:02d} {self.axis} {'OK' if ok else 'RJ'} {status} {self.flag} {data}"
+
+    def handle(self, message: bytes) -> str | None:
+        text = message.decode("ascii", "replace").strip()
+        self.commands.append(text)
+        if not text.startswith("/"):
+            return None
+        parts = text[1:].split()
+        try:
+            dev = int(parts[0]) if parts else 0
+            axis = int(parts[1]) if len(parts) > 1 else 0
+        except ValueError:
+            return None
+        if dev not in (0, self.device):
+            return None
+        if axis not in (0, self.axis):
+            return self._reply(False, "BADAXIS")
+        words = parts[2:]
+        if not words:
+            return self._reply(True, "0")
+        cmd = words[0]
+        if cmd == "home":
+            if self.flag in ("WR", "FS", "WL"):
+                self.flag = "--"
+            self.homed = True
+            self._go(self.home_steps)
+            return self._reply(True, "0")
+        if cmd == "stop":
+            self._halt()
+            return self._reply(True, "0")
+        if cmd == "warnings" and words[1:] == ["clear"]:
+            flags = self.flag
+            if self.flag != "WR":
+                self.flag = "--"
+            return self._reply(True, "01 " + flags if flags != "--" else "00")
+        if cmd == "move" and len(words) == 3 and words[1] == "abs":
+            if not self.homed:
+                return self._reply(False, "BADDATA")
+            if self.flag == "FS":
+                return self._reply(False, "BADDATA")
+            try:
+                target = int(words[2])
+            except ValueError:
+                return self._reply(False, "BADDATA")
+            if not self.limit_min <= target <= self.limit_max:
+                return self._reply(False, "BADDATA")
+            self._go(target)
+            return self._reply(True, "0")
+        if cmd == "get" and len(words) == 2:
+            value = {
+                "pos": round(self._steps_now()),
+                "maxspeed": self.maxspeed,
+                "limit.min": self.limit_min,
+                "limit.max": self.limit_max,
+            }.get(words[1])
+            if value is None:
+                return self._reply(False, "BADCOMMAND")
+            return self._reply(True, str(value))
+        if cmd == "set" and len(words) == 3 and words[1] == "maxspeed":
+            try:
+                value = int(words[2])
+            except ValueError:
+                return self._reply(False, "BADDATA")
+            if value <= 0:
+                return self._reply(False, "BADDATA")
+            self.maxspeed = value
+            return self._reply(True, "0")
+        return self._reply(False, "BADCOMMAND")

@@ -1,0 +1,103 @@
+"""Quasi-band edges: the default chain's numbers, DEM against continuum, scaling laws."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sim_backend import dem
+from sim_backend.dem.spec import ChainSpec, MaterialSpec
+
+
+@pytest.fixture(scope="module")
+def chain() -> dem.Chain:
+    return dem.build_chain(dem.default_chain_spec())
+
+
+def test_contact_constants(chain: dem.Chain) -> None:
+    assert chain.beta_c == pytest.approx(4.08e9, rel=5e-3)
+    assert chain.delta0_m == pytest.approx(1.15e-6, rel=5e-3)
+    assert chain.K_lin == pytest.approx(6.5e6, rel=1e-2)
+    assert chain.n == 31 and chain.n_modes == 3
+
+
+def test_default_chain_band_edges(chain: dem.Chain) -> None:
+    bands = dem.quasi_bands(chain, 3)
+    assert bands.onset_Hz.shape == (31, 3)
+    # the central (100 mm) cylinder's first local-resonance band is the paper's two inputs
+    assert bands.onset_Hz[15, 1] == pytest.approx(6.62e3, rel=3e-3)
+    assert bands.cutoff_Hz[15, 1] == pytest.approx(8.94e3, rel=3e-3)
+    assert bands.onset_Hz[0, 1] == pytest.approx(8.08e3, rel=5e-3)
+    assert bands.cutoff_Hz[30, 1] == pytest.approx(8.01e3, rel=5e-3)
+    # bands slide down along the chain, and are ordered
+    assert np.all(np.diff(bands.onset_Hz[:, 1]) < 0)
+    assert np.all(np.diff(bands.cutoff_Hz[:, 1]) < 0)
+    assert np.all(bands.cutoff_Hz[:, 0] < bands.onset_Hz[:, 1])
+    assert np.all(bands.onset_Hz[:, 1] < bands.cutoff_Hz[:, 1])
+    # the end cylinders' first local-resonance bands barely overlap
+    assert bands.cutoff_Hz[30, 1] < bands.onset_Hz[0, 1]
+
+
+def test_dem_edges_match_continuum_below_15kHz(chain: dem.Chain) -> None:
+    cell = dem.quasi_bands(chain, 3)
+    cont = dem.continuum_bands(chain, 3)
+    below = cont.cutoff_Hz < 15e3
+    assert below.sum() >= 62  # bands 0 and 1 of every cylinder
+    np.testing.assert_allclose(cell.cutoff_Hz[below], cont.cutoff_Hz[below], rtol=1e-2)
+    on = below.copy()
+    on[:, 0] = False
+    np.testing.assert_allclose(cell.onset_Hz[on], cont.onset_Hz[on], rtol=1e-2)
+    # in fact much better than 1 %
+    np.testing.assert_allclose(cell.cutoff_Hz[below], cont.cutoff_Hz[below], rtol=2e-3)
+
+
+def _edges(**changes: object) -> tuple[float, float]:
+    base = dict(
+        lengths=("100 mm", "100 mm"), diameter="13.6 mm", preload="5 N",
+        beam_theory="euler-bernoulli",
+    )  # fmt: skip
+    base.update(changes)  # type: ignore[arg-type]
+    b = dem.quasi_bands(dem.build_chain(ChainSpec.model_validate(base)), 2)
+    return float(b.onset_Hz[0, 1]), float(b.cutoff_Hz[0, 1])
+
+
+def test_scaling_with_length_and_diameter() -> None:
+    on, _ = _edges()
+    on_long, _ = _edges(lengths=("200 mm", "200 mm"))
+    on_thick, _ = _edges(diameter="20.4 mm")
+    assert on_long == pytest.approx(on / 4, rel=1e-9)  # EB: onset ~ d / L^2
+    assert on_thick == pytest.approx(on * 1.5, rel=1e-9)
+
+
+def test_scaling_with_preload() -> None:
+    on, cut = _edges()
+    on8, cut8 = _edges(preload="40 N")
+    assert on8 == pytest.approx(on, rel=1e-12)  # the onset is the free cylinder's
+    assert cut8 > cut  # K ~ F0^(1/3) raises the cutoff
+    # with K -> 2 K (F0 x 8) the cutoff solves w^2 M(w) = 8 K
+    chain8 = dem.build_chain(
+        ChainSpec.model_validate(
+            dict(lengths=("100 mm", "100 mm"), preload="40 N", beam_theory="euler-bernoulli")
+        )
+    )
+    w = 2 * np.pi * cut8
+    m = dem.bands.cell_apparent_mass_kg(chain8, 0, w)
+    assert w**2 * m == pytest.approx(4 * chain8.K_lin, rel=1e-9)
+
+
+def test_scaling_with_material() -> None:
+    on, cut = _edges(beam_theory="timoshenko")
+    stiff = MaterialSpec(youngs_modulus="288 GPa")
+    on4, cut4 = _edges(beam_theory="timoshenko", material=stiff, preload="20 N")
+    # E x 4 and F0 x 4 scale every stiffness by 4: all edges x 2
+    assert on4 == pytest.approx(2 * on, rel=1e-9)
+    assert cut4 == pytest.approx(2 * cut, rel=1e-9)
+    heavy = MaterialSpec(density="8800 kg/m^3")
+    on_h, cut_h = _edges(beam_theory="timoshenko", material=heavy)
+    assert on_h == pytest.approx(on / 2, rel=1e-9)
+    assert cut_h == pytest.approx(cut / 2, rel=1e-9)
+
+
+def test_too_many_bands_refused(chain: dem.Chain) -> None:
+    with pytest.raises(ValueError, match="n_bands"):
+        dem.quasi_bands(chain, 5)

@@ -1,0 +1,86 @@
+"""``biafc bands`` and ``biafc simulate``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from daq.cli.biafc import main
+from protocols.runfile import read_run
+
+
+def test_bands_table_and_csv(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "bands.csv"
+    assert main(["bands", "--csv", str(out), "--bands", "2"]) == 0
+    text = capsys.readouterr().out
+    rows = [line.split() for line in text.splitlines() if not line.startswith("#")]
+    assert rows[0][:2] == ["cylinder", "length_mm"]
+    assert len(rows) == 32
+    central = rows[16]
+    assert central[0] == "16" and float(central[1]) == pytest.approx(100.0)
+    assert float(central[4]) == pytest.approx(6.62, abs=0.02)  # band 1 onset, kHz
+    assert float(central[5]) == pytest.approx(8.94, abs=0.03)  # band 1 cutoff, kHz
+    lines = out.read_text().splitlines()
+    assert len(lines) == 32 and lines[0].startswith("cylinder,length_mm,band0_onset_kHz")
+
+
+def test_bands_bad_chain_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("n_cylinders: 3\nlength_first: 90\nlength_last: 110 mm\n")
+    assert main(["bands", "--chain", str(bad)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "length_first" in err and str(bad) in err
+
+
+def test_simulate_writes_a_run_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "run.h5"
+    argv = ["simulate", "--direction", "rtl", "--amplitude", "2 um", "--duration", "5 ms",
+            "--rate", "250 kS/s", "--out", str(out)]  # fmt: skip
+    assert main(argv) == 0
+    text = capsys.readouterr().out
+    assert "transmitted energy ratio" in text and "spectral peak" in text
+    run = read_run(out)
+    assert run.status == "complete" and run.backend == "dem"
+    scan = run.scans["rtl"]
+    assert scan.velocity.shape == (1, 31, 1251)
+    assert scan.amplitude_units == "m" and scan.amplitudes[0] == pytest.approx(2e-6)
+    assert np.all(scan.done == 1)
+    assert np.all(np.isfinite(scan.velocity))
+    assert scan.f_center_Hz == pytest.approx(6.63e3)
+    assert run.chain.onset_Hz.shape == (31, 3)
+    assert run.simulation["integrator"] == "blanes-moan4"
+    # refuses to overwrite; force drive accepted
+    assert main(argv) == 2
+    out2 = tmp_path / "force.h5"
+    assert main(["simulate", "--direction", "ltr", "--amplitude", "3N", "--duration", "2 ms",
+                 "--out", str(out2)]) == 0  # fmt: skip
+    assert read_run(out2).scans["ltr"].amplitude_units == "N"
+
+
+@pytest.mark.parametrize(
+    ("extra", "word"),
+    [
+        (["--amplitude", "2"], "--amplitude"),
+        (["--amplitude", "2 V"], "--amplitude"),
+        (["--amplitude", "2 um", "--duration", "30"], "--duration"),
+        (["--amplitude", "2 um", "--integrator", "euler"], "--integrator"),
+    ],
+)
+def test_simulate_bad_input(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], extra: list[str], word: str
+) -> None:
+    out = tmp_path / "x.h5"
+    assert main(["simulate", "--direction", "ltr", "--out", str(out), *extra]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and word in err
+    assert not out.exists()
+
+
+def test_bands_check_against_continuum(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["bands", "--check", "--bands", "2"]) == 0
+    lines = [x for x in capsys.readouterr().out.splitlines() if x.startswith("# band 1")]
+    assert len(lines) == 1
+    cutoff_pct = float(lines[0].split("cutoff")[1].split("%")[0])
+    assert 0 <= cutoff_pct < 1.0

@@ -1,0 +1,183 @@
+"""Every real driver end-to-end on its wire-level emulator through SimTransport, with faults."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from instruments.burst import Burst, burst_samples
+from instruments.errors import (
+    InstrumentTimeout,
+    NotHomedError,
+    ReplyError,
+    SignalLostError,
+    StallError,
+)
+from instruments.interfaces import BurstConfig, FunctionGenerator, Stage, Vibrometer
+from instruments.keysight import GeneratorLimits, KeysightGenerator
+from instruments.polytec import PolytecVibrometer
+from instruments.zaber import ZaberSettings, ZaberStage
+from sim_backend.emulators import (
+    KeysightEmulator,
+    PolytecEmulator,
+    SimClock,
+    SimTransport,
+    ZaberEmulator,
+)
+
+LIMITS = GeneratorLimits(max_piezo_V=150.0, amplifier_gain=20.0, max_amplitude_Vpp=10.0)
+CFG = BurstConfig(Burst(8920.0, cycles=5.0), amplitude_Vpp=4.0, sample_rate_Hz=1.0e6, offset_V=0.1)
+
+
+@pytest.fixture()
+def clock() -> SimClock:
+    return SimClock()
+
+
+def make_generator(clock: SimClock) -> tuple[KeysightGenerator, KeysightEmulator]:
+    emu = KeysightEmulator()
+    return KeysightGenerator(SimTransport(emu, "generator", 2.0, clock), LIMITS), emu
+
+
+def test_generator_state_and_trigger_hook(clock: SimClock) -> None:
+    gen, emu = make_generator(clock)
+    assert isinstance(gen, FunctionGenerator)
+    fired: list[tuple[int, ...]] = []
+    emu.trigger_hooks.append(fired.append)
+    gen.identify()
+    gen.configure_burst(2, CFG)
+    ch = emu.channels[2]
+    assert not ch.output_on
+    expected = np.rint(burst_samples(CFG.shape, CFG.sample_rate_Hz) * 32767) / 32767
+    np.testing.assert_allclose(ch.waveform, expected, atol=1e-12)
+    assert (ch.sample_rate_Hz, ch.amplitude_Vpp, ch.offset_V) == (1.0e6, 4.0, 0.1)
+    assert ch.load_ohm == np.inf and ch.burst_on and ch.burst_cycles == 1
+    assert ch.trigger_source == "BUS" and emu.trigger_out_on and emu.trigger_out_source == 2
+    gen.output(2, True)
+    assert ch.output_on
+    gen.trigger()
+    gen.wait_complete()
+    assert fired == [(2,)]
+    gen.safe_state()
+    assert not any(c.output_on for c in emu.channels.values())
+    assert gen.errors() == []
+
+
+def test_emulator_rejects_bad_scpi_with_real_codes(clock: SimClock) -> None:
+    gen, emu = make_generator(clock)
+    t = gen.transport
+    t.write("SOUR1:VOLT 30")  # over the 20 Vpp high-Z maximum (load is 50 Ohm by default: 10)
+    t.write("NOPE:NOPE 1")
+    t.write("SOUR1:FUNC:ARB MISSING")
+    t.write_block("SOUR1:DATA:ARB:DAC X,", b"\x00")
+    assert gen.errors() == [
+        "-222,Data out of range",
+        "-113,Undefined header",
+        "-224,Illegal parameter value;waveform not in volatile memory",
+        "-161,Invalid block data",
+    ]
+    for _ in range(25):
+        emu.push_error(-100, "Command error")
+    errs = gen.errors()
+    assert len(errs) == 20 and errs[-1] == "-350,Queue overflow"
+
+
+def test_generator_error_injection_and_silence(clock: SimClock) -> None:
+    gen, emu = make_generator(clock)
+    emu.push_error(-310, "System error")
+    with pytest.raises(ReplyError, match="-310,System error"):
+        gen.configure_burst(1, CFG)
+    assert not emu.channels[1].output_on
+    emu.responsive = False
+    t0 = clock.now()
+    with pytest.raises(InstrumentTimeout, match=r"generator: no reply to '\*OPC\?' within 2 s"):
+        gen.wait_complete()
+    assert clock.now() == pytest.approx(t0 + 2.0)
+    gen.safe_state()  # dead link: logs, does not raise
+
+
+def test_vibrometer_on_emulator(clock: SimClock) -> None:
+    emu = PolytecEmulator()
+    vib = PolytecVibrometer(SimTransport(emu, "vibrometer", 1.0, clock))
+    assert isinstance(vib, Vibrometer)
+    vib.set_velocity_range("VD-09 50mm/s/V")
+    assert emu.range_name == "VD-09 50mm/s/V"
+    snap = vib.snapshot()
+    assert snap["sensitivity_m_per_s_per_V"] == pytest.approx(0.05)
+    assert snap["signal_delay_s"] == pytest.approx(7.3e-6)
+    assert snap["bandwidth_Hz"] == pytest.approx(100e3)
+    assert snap["identity"] == "OFV-5000 / OFV-534"
+    emu.signal_level = 0.5
+    assert vib.check_signal() == pytest.approx(0.5)
+    emu.lose_signal()
+    with pytest.raises(SignalLostError):
+        vib.check_signal()
+    with pytest.raises(ReplyError, match="reads back"):
+        vib.set_velocity_range("VD-09 2mm/s/V")  # not a range of this decoder
+    assert vib.autofocus() and emu.autofocus_count == 1
+
+
+def make_stage(clock: SimClock, **kw: object) -> tuple[ZaberStage, ZaberEmulator]:
+    emu = ZaberEmulator(clock, travel_m=(0.0, 0.3))
+    s = ZaberSettings(clock=clock, soft_limits_m=(0.005, 0.25), **kw)  # type: ignore[arg-type]
+    return ZaberStage(SimTransport(emu, "stage", 1.0, clock), s), emu
+
+
+def test_stage_moves_take_simulated_time(clock: SimClock) -> None:
+    stage, emu = make_stage(clock)
+    assert isinstance(stage, Stage)
+    assert not stage.is_homed()
+    with pytest.raises(NotHomedError):
+        stage.move_to(0.1)
+    stage.home()
+    assert stage.is_homed() and emu.homed
+    t0 = clock.now()
+    stage.move_to(0.1)
+    assert emu.position_m() == pytest.approx(0.1, abs=1e-6)
+    assert clock.now() - t0 == pytest.approx(0.1 / 0.025 + 0.2, abs=0.1)  # travel + settle
+    stage.move_to(0.05)  # from above: overshoots below, approaches upwards
+    assert any(c.startswith("/1 1 move abs") for c in emu.commands)
+    assert stage.position() == pytest.approx(0.05, abs=1e-6)
+    assert stage.speed() == pytest.approx(0.025, rel=1e-3)
+
+
+def test_stage_faults(clock: SimClock) -> None:
+    stage, emu = make_stage(clock)
+    stage.home()
+    emu.stall()
+    with pytest.raises(StallError, match="stalled"):
+        stage.move_to(0.1)
+    stage.clear_warnings()
+    stage.move_to(0.1)
+    emu.lose_homing()
+    with pytest.raises(NotHomedError):
+        stage.move_to(0.2)
+    emu.responsive = False
+    with pytest.raises(InstrumentTimeout, match="stage: no reply"):
+        stage.position()
+    stage.safe_state()
+
+
+def test_stage_move_timeout_stops_axis(clock: SimClock) -> None:
+    stage, emu = make_stage(clock, timeout_margin_s=0.0)
+    stage.home()
+    emu.maxspeed = 1  # far slower than the driver believes
+    with pytest.raises(InstrumentTimeout, match="not finished"):
+        stage.move_to(0.1)
+    assert not emu.busy()
+
+
+def test_make_emulators_opens_all_drivers() -> None:
+    from sim_backend.emulators import make_emulators
+
+    emus = make_emulators(stage_travel_m=(0.0, 0.3))
+    gen, vib, stage = emus.drivers(LIMITS, ZaberSettings(soft_limits_m=(0.01, 0.2)))
+    assert gen.identify().startswith("Keysight")
+    assert vib.sensitivity_m_per_s_per_V() == pytest.approx(0.01)
+    stage.home()
+    stage.move_to(0.02)
+    assert emus.stage.position_m() == pytest.approx(0.02, abs=1e-6)
+    assert emus.clock.now() > 0.0
+    assert emus.transport("stage") is emus.stage_transport
+    with pytest.raises(ValueError, match="no emulated instrument 'laser'"):
+        emus.transport("laser")

@@ -1,0 +1,31 @@
+"""``python -m engine.fake_cli ARGS...`` (from tests/): run_protocol with the bench replaced by
+the fake instruments (slow reads), for the SIGKILL / SIGINT subprocess tests. Prints the fake
+generator's output states as ``OUTPUTS {...}`` when the run returns."""
+
+from __future__ import annotations
+
+import os
+import sys
+
+import daq.bench_assembly
+import daq.cli.run_protocol as rp
+
+from .fakes import FakeWorld, Faults, fake_bench
+
+WORLD = FakeWorld(
+    seed=int(os.environ.get("FAKE_SEED", "0")),
+    faults=Faults(read_sleep_s=float(os.environ.get("FAKE_READ_S", "0.05"))),
+)
+
+
+def _assemble(bf, *, seed=None, faults=None):  # type: ignore[no-untyped-def]
+    WORLD.seed = seed or 0
+    return fake_bench(WORLD)
+
+
+daq.bench_assembly.assemble = _assemble  # type: ignore[assignment]
+
+if __name__ == "__main__":
+    code = rp.main(sys.argv[1:])
+    print(f"OUTPUTS {WORLD.outputs}", flush=True)
+    sys.exit(code)

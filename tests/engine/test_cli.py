@@ -1,0 +1,212 @@
+"""``run_protocol``: bad input refused in one line before anything moves; dry run; crash safety
+(SIGKILL, then --resume) and Ctrl-C, on the fake instruments in a subprocess."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+import daq.bench_assembly
+from daq.cli import run_protocol as rp
+from protocols.runfile import PointState, read_run
+
+from .fakes import FakeWorld, fake_bench
+from .helpers import PROTOCOL
+
+TESTS = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture
+def proto_file(tmp_path: Path) -> Path:
+    f = tmp_path / "proto.yaml"
+    f.write_text(PROTOCOL)
+    return f
+
+
+@pytest.fixture
+def no_instruments(monkeypatch: pytest.MonkeyPatch) -> list[int]:
+    calls: list[int] = []
+
+    def forbidden(*a: object, **k: object) -> None:
+        calls.append(1)
+        raise AssertionError("an instrument was opened")
+
+    monkeypatch.setattr(daq.bench_assembly, "assemble", forbidden)
+    return calls
+
+
+def _main_err(args: list[str], capsys: pytest.CaptureFixture[str]) -> str:
+    code = rp.main(args)
+    err = capsys.readouterr().err.strip()
+    assert code == 2
+    assert len(err.splitlines()) == 1, err
+    return err
+
+
+def test_existing_output_is_refused(proto_file, tmp_path, capsys, no_instruments) -> None:
+    out = tmp_path / "run.h5"
+    out.write_bytes(b"x")
+    err = _main_err([str(proto_file), "--out", str(out)], capsys)
+    assert "exists already" in err and "--resume" in err
+    assert out.read_bytes() == b"x" and not no_instruments
+
+
+def test_unwritable_output_is_refused(
+    proto_file, tmp_path, capsys, no_instruments, monkeypatch
+) -> None:
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    ro.chmod(0o500)
+    real_access = os.access
+    if real_access(ro, os.W_OK):  # root writes anywhere: let the folder say no
+        monkeypatch.setattr(
+            os, "access", lambda p, m: False if Path(p) == ro else real_access(p, m)
+        )
+    try:
+        err = _main_err([str(proto_file), "--out", str(ro / "sub" / "run.h5")], capsys)
+        assert "cannot write in" in err and str(ro) in err
+    finally:
+        ro.chmod(0o700)
+
+
+def test_output_under_a_file_is_refused(proto_file, tmp_path, capsys, no_instruments) -> None:
+    blocker = tmp_path / "blocker"
+    blocker.write_text("")
+    err = _main_err([str(proto_file), "--out", str(blocker / "run.h5")], capsys)
+    assert "cannot write" in err and not no_instruments
+
+
+def test_bad_protocol_is_one_line(tmp_path, capsys, no_instruments) -> None:
+    f = tmp_path / "p.yaml"
+    f.write_text(PROTOCOL.replace("averages: 2", "averages: 2\ncolour: red"))
+    err = _main_err([str(f), "--out", str(tmp_path / "o.h5")], capsys)
+    assert err.endswith("colour: unknown key") and f"{f}:" in err
+    assert not (tmp_path / "o.h5").exists() and not no_instruments
+
+
+def test_missing_resume_file(proto_file, tmp_path, capsys, no_instruments) -> None:
+    assert "does not exist" in _main_err(
+        [str(proto_file), "--resume", str(tmp_path / "n.h5")], capsys
+    )
+
+
+def test_dry_run_prints_points_and_eta(proto_file, tmp_path, capsys, no_instruments) -> None:
+    assert rp.main([str(proto_file), "--dry-run", "--out", str(tmp_path / "o.h5")]) == 0
+    out = capsys.readouterr().out
+    assert "12 points" in out and "estimated" in out
+    assert not (tmp_path / "o.h5").exists() and not no_instruments
+
+
+def test_cli_run_in_process(proto_file, tmp_path, capsys, monkeypatch) -> None:
+    monkeypatch.setattr(daq.bench_assembly, "assemble", lambda bf, **k: fake_bench(FakeWorld()))
+    out = tmp_path / "o.h5"
+    assert rp.main([str(proto_file), "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "point 12/12" in text and "complete: 12 points" in text
+    assert read_run(out).status == "complete"
+
+
+def _spawn(args: list[str], read_s: float = 0.05) -> subprocess.Popen[str]:
+    env = dict(os.environ, FAKE_READ_S=str(read_s), PYTHONPATH=str(TESTS))
+    return subprocess.Popen(
+        [sys.executable, "-m", "engine.fake_cli", *args],
+        cwd=TESTS,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+
+
+def _wait_done(path: Path, n: int, proc: subprocess.Popen[str], timeout_s: float = 60) -> int:
+    t_end = time.monotonic() + timeout_s
+    while time.monotonic() < t_end:
+        assert proc.poll() is None, proc.communicate()
+        if path.exists():
+            try:
+                with h5py.File(path, "r", swmr=True) as f:
+                    got = int(np.sum(f["scan/ltr/done"][...] == PointState.DONE))
+                if got >= n:
+                    return got
+            except (OSError, KeyError):
+                pass
+        time.sleep(0.05)
+    raise AssertionError("the run made no progress")
+
+
+def test_sigkill_then_resume_equals_an_uninterrupted_run(proto_file, tmp_path, monkeypatch) -> None:
+    killed = tmp_path / "killed.h5"
+    proc = _spawn([str(proto_file), "--out", str(killed), "--seed", "5"])
+    _wait_done(killed, 2, proc)
+    proc.kill()
+    proc.wait(10)
+    part = read_run(killed)  # readable, completed points intact
+    assert part.status == "running"
+    n_done = int(sum(np.sum(s.done == PointState.DONE) for s in part.scans.values()))
+    assert 2 <= n_done < 12
+    for s in part.scans.values():
+        measured = s.done == PointState.DONE
+        assert np.all(np.isfinite(s.velocity[measured]))
+        assert np.all(np.isnan(s.velocity[~measured]))
+    monkeypatch.setattr(
+        daq.bench_assembly,
+        "assemble",
+        lambda bf, seed=None, **k: fake_bench(FakeWorld(seed=seed or 0)),
+    )
+    assert rp.main([str(proto_file), "--resume", str(killed), "--quiet"]) == 0  # seed from the file
+    full = tmp_path / "full.h5"
+    assert rp.main([str(proto_file), "--out", str(full), "--seed", "5", "--quiet"]) == 0
+    a, b = read_run(full), read_run(killed)
+    assert b.status == "complete" and b.attrs["seed"] == 5
+    for d in ("ltr", "rtl"):
+        np.testing.assert_array_equal(a.scans[d].done, b.scans[d].done)
+        np.testing.assert_array_equal(a.scans[d].velocity, b.scans[d].velocity)
+    assert any("resumed" in m for _, _, m in b.log)
+
+
+def test_sigint_aborts_safely(proto_file, tmp_path) -> None:
+    out = tmp_path / "int.h5"
+    proc = _spawn([str(proto_file), "--out", str(out)])
+    _wait_done(out, 1, proc)
+    proc.send_signal(signal.SIGINT)
+    stdout, stderr = proc.communicate(timeout=30)
+    assert proc.returncode == 130, stderr
+    assert "run aborted: interrupted by SIGINT" in stderr
+    assert "OUTPUTS {1: False, 2: False}" in stdout
+    run = read_run(out)
+    assert run.status == "aborted"
+    assert any("aborted" in m for _, _, m in run.log)
+
+
+def test_sigterm_aborts_safely(proto_file, tmp_path) -> None:
+    out = tmp_path / "term.h5"
+    proc = _spawn([str(proto_file), "--out", str(out)])
+    _wait_done(out, 1, proc)
+    proc.send_signal(signal.SIGTERM)
+    stdout, stderr = proc.communicate(timeout=30)
+    assert proc.returncode == 1, stderr
+    assert "OUTPUTS {1: False, 2: False}" in stdout
+    assert read_run(out).status == "aborted"
+
+
+def test_lookup3_matches_hdf5_superblock_checksum(tmp_path: Path) -> None:
+    import struct
+
+    from daq.store.recover import clear_consistency_flags, lookup3
+
+    f = tmp_path / "x.h5"
+    with h5py.File(f, "w", libver="latest") as h:
+        h["a"] = [1, 2]
+    raw = f.read_bytes()
+    n = 12 + 4 * raw[9]
+    assert lookup3(raw[:n]) == struct.unpack_from("<I", raw, n)[0]
+    assert clear_consistency_flags(f) is False  # a cleanly closed file has no flags set
+    assert f.read_bytes() == raw

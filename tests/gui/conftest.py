@@ -1,0 +1,131 @@
+"""Fixtures of the GUI tests: the bench window on the simulated bench (or, while the simulated
+bench's drivers are not installed, on the engine tests' fake instruments, said on stdout)."""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+from PySide6.QtCore import QElapsedTimer, QTimer
+
+from daq.bench_assembly import AssemblyError, assemble, chain_info
+from daq.gui.main_window import MainWindow
+from protocols.bench import load_bench
+
+ROOT = Path(__file__).resolve().parents[2]
+SMOKE = ROOT / "protocols" / "smoke.yaml"
+
+
+@pytest.fixture
+def screenshots(tmp_path: Path) -> Path:
+    """Where screenshots go: ``$BIAFC_SCREENSHOTS`` (e.g. ``docs/screenshots`` to refresh the
+    docs' pictures), else a temporary folder so a test run leaves the tree untouched."""
+    target = os.environ.get("BIAFC_SCREENSHOTS")
+    out = Path(target) if target else tmp_path / "screenshots"
+    out.mkdir(parents=True, exist_ok=True)
+    return out
+
+
+def _sim_bench_available() -> bool:
+    try:
+        assemble(load_bench(None), seed=0).close()
+    except AssemblyError:
+        return False
+    return True
+
+
+SIM_AVAILABLE = _sim_bench_available()
+
+
+class SlowDigitiser:
+    """The simulated bench's digitiser with ``read_sleep_s`` of wall time per read (the
+    simulated bench takes no wall time), so a test can press buttons mid-run."""
+
+    def __init__(self, inner: Any, read_sleep_s: float) -> None:
+        self._inner = inner
+        self._sleep = read_sleep_s
+
+    def read(self) -> Any:
+        time.sleep(self._sleep)
+        return self._inner.read()
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._inner, name)
+
+
+def make_assembler(read_sleep_s: float = 0.0) -> Callable[[Any, int | None], Any]:
+    """The simulated bench; the engine tests' fakes (with the real chain) when it is missing."""
+    if SIM_AVAILABLE:
+
+        def sim(bf: Any, seed: int | None) -> Any:
+            inst = assemble(bf, seed=seed)
+            if read_sleep_s:
+                inst.digitiser = SlowDigitiser(inst.digitiser, read_sleep_s)
+            return inst
+
+        return sim
+    from engine.fakes import FakeWorld, Faults, fake_bench
+
+    print("NOTE: simulated bench drivers not installed; GUI tests use the fake instruments")
+
+    def fake(bf: Any, seed: int | None) -> Any:
+        inst = fake_bench(FakeWorld(seed=seed or 0, faults=Faults(read_sleep_s=read_sleep_s)))
+        inst.chain = chain_info(bf)
+        return inst
+
+    return fake
+
+
+@pytest.fixture
+def window(qtbot: Any, tmp_path: Path) -> Iterator[MainWindow]:
+    win = MainWindow(None, SMOKE, assembler=make_assembler(read_sleep_s=0.03))
+    win.confirm_close = lambda: True  # type: ignore[method-assign]
+    qtbot.addWidget(win)
+    win.run_panel.out_edit.setText(str(tmp_path / "run.h5"))
+    win.show()
+    yield win
+    if win.running:
+        win.engine.abort("test teardown")
+        win.engine.wait(30)
+
+
+def connect(qtbot: Any, win: MainWindow) -> None:
+    with qtbot.waitSignal(win.connected, timeout=60_000) as blocker:
+        win.bench_panel.connect_button.click()
+    assert blocker.args == [True], win.log_view.lines[-3:]
+
+
+class StallProbe:
+    """A 10 ms QTimer that records the longest gap between its ticks (ms): how long the event
+    loop was blocked."""
+
+    def __init__(self) -> None:
+        self.timer = QTimer()
+        self.timer.setInterval(10)
+        self.clock = QElapsedTimer()
+        self.gaps_ms: list[float] = []
+        self.timer.timeout.connect(self._tick)
+
+    def start(self) -> None:
+        self.clock.start()
+        self.timer.start()
+
+    def pause(self) -> None:
+        self.timer.stop()
+
+    def _tick(self) -> None:
+        self.gaps_ms.append(self.clock.restart())
+
+    def stop(self) -> float:
+        self.timer.stop()
+        return max(self.gaps_ms) if self.gaps_ms else float("inf")
+
+
+def wait_until(qtbot: Any, cond: Callable[[], bool], timeout_s: float = 60.0) -> None:
+    t0 = time.monotonic()
+    qtbot.waitUntil(cond, timeout=int(timeout_s * 1000))
+    assert time.monotonic() - t0 <= timeout_s

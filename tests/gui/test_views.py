@@ -1,0 +1,64 @@
+"""The live views draw a 30 ms x 1 MS/s record quickly (decimated), and the CLI entry checks
+its files before opening a window."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from daq.cli.biafc import main as biafc_main
+from daq.gui.live_data import LiveData, ScanView
+from daq.gui.views import LiveViews
+
+
+def _big_point() -> dict[str, Any]:
+    rate, dur = 1e6, 30e-3
+    t = np.arange(int(rate * dur)) / rate
+    v = 1e-3 * np.sin(2 * np.pi * 8.92e3 * t) * np.exp(-t / 5e-3)
+    return {
+        "direction": "ltr",
+        "amplitude_index": 0,
+        "cylinder_index": 0,
+        "amplitude": 2e-6,
+        "amplitude_units": "m",
+        "cylinder": 1,
+        "time_s": t,
+        "velocity_m_per_s": v,
+    }
+
+
+def test_long_trace_redraw_is_fast(qtbot: Any) -> None:
+    views = LiveViews()
+    qtbot.addWidget(views)
+    views.resize(1000, 600)
+    views.show()
+    live = LiveData()
+    live.scans["ltr"] = ScanView.empty(
+        "ltr", 8.92e3, np.array([2e-6]), "m", np.array([1, 2], np.int32), 30_000, 1e6
+    )
+    t0 = time.perf_counter()
+    live.add_point(_big_point())
+    views.redraw(live)
+    qtbot.wait(1)
+    dt = time.perf_counter() - t0
+    assert views.trace.n_drawn <= 4002  # decimated, not 30 000 points
+    assert views.spatial.n_rows == 1 and views.sweep.n_cells == 1
+    assert dt < 0.5, f"a 30 ms x 1 MS/s point took {dt * 1e3:.0f} ms to draw"
+    for _ in range(3):  # steady state: well under a frame budget of the 100 ms redraw timer
+        live.add_point(_big_point())
+        t0 = time.perf_counter()
+        views.redraw(live)
+        assert time.perf_counter() - t0 < 0.1
+
+
+def test_biafc_gui_missing_file_is_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    code = biafc_main(["gui", "--protocol", str(tmp_path / "nope.yaml")])
+    err = capsys.readouterr().err.strip()
+    assert code == 2
+    assert "nope.yaml" in err and len(err.splitlines()) == 1

@@ -1,0 +1,189 @@
+"""The bench window, offscreen: a run to completion, pause/resume/abort from the buttons,
+validation errors, responsiveness, close during a run, browsing a run file. Screenshots of
+the window mid-run and after a finished run go to $BIAFC_SCREENSHOTS (docs/screenshots to
+refresh the docs) or a temporary folder."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from daq.gui.main_window import MainWindow
+from protocols.runfile import PointState, read_run
+
+from .conftest import SMOKE, StallProbe, connect, make_assembler, wait_until
+
+#: the event loop may not be blocked longer than this during a run (ms)
+MAX_STALL_MS = 250.0
+
+
+def _done_count(path: Path) -> int:
+    run = read_run(path)
+    return sum(int((s.done == PointState.DONE).sum()) for s in run.scans.values())
+
+
+def test_smoke_run_to_completion(
+    qtbot: Any, window: MainWindow, tmp_path: Path, screenshots: Path
+) -> None:
+    win = window
+    assert win.protocol_panel.valid, win.protocol_panel.status_label.text()
+    assert "6 points" in win.protocol_panel.status_label.text()
+    connect(qtbot, win)
+    assert win.bench_panel.tree.topLevelItemCount() >= 4  # each instrument's state shown
+    probe = StallProbe()
+    probe.start()
+    shot_mid = False
+    with qtbot.waitSignal(win.run_finished, timeout=120_000) as blocker:
+        win.run_panel.start_button.click()
+        while not win.last_result and not shot_mid:
+            qtbot.wait(20)
+            if win.live.n_points >= 3 and not shot_mid and win.running:
+                qtbot.wait(150)  # let a redraw happen
+                probe.pause()  # the test's own screenshot blocks the loop; not the window's
+                assert win.grab().save(str(screenshots / "bench_window_mid_run.png"))
+                probe.start()
+                shot_mid = True
+    longest = probe.stop()
+    assert blocker.args == ["complete"]
+    qtbot.wait(150)
+    # the views hold data
+    assert win.views.trace.n_drawn > 100
+    assert win.views.spectrum.n_drawn > 10
+    assert win.views.spatial.n_rows == 3  # smoke: cylinders 1, 8, 16
+    assert win.views.sweep.n_cells == 6  # 2 amplitudes x 3 cylinders
+    assert win.views.bands.n_bands >= 2
+    assert win.run_panel.progress.value() == 6
+    # the file is complete
+    run = read_run(tmp_path / "run.h5")
+    assert run.status == "complete"
+    assert bool(np.all(run.scans["ltr"].done == PointState.DONE))
+    assert np.all(np.isfinite(run.scans["ltr"].velocity))
+    # the window kept turning
+    assert longest < MAX_STALL_MS, f"event loop stalled {longest:.0f} ms"
+    print(f"longest event-loop stall during the smoke run: {longest:.1f} ms")
+    win.views.setCurrentIndex(2)
+    qtbot.wait(50)
+    assert win.grab().save(str(screenshots / "bench_window_finished.png"))
+    assert shot_mid
+    for index, name in ((1, "spectrum"), (3, "quasi_bands"), (4, "amplitude_sweep")):
+        win.views.setCurrentIndex(index)
+        qtbot.wait(50)
+        assert win.views.grab().save(str(screenshots / f"view_{name}.png"))
+
+
+def test_pause_resume_abort_buttons(qtbot: Any, tmp_path: Path) -> None:
+    win = MainWindow(None, SMOKE, assembler=make_assembler(read_sleep_s=0.25))
+    win.confirm_close = lambda: True  # type: ignore[method-assign]
+    qtbot.addWidget(win)
+    win.show()
+    rp = win.run_panel
+    rp.out_edit.setText(str(tmp_path / "a.h5"))
+    connect(qtbot, win)
+    assert not rp.pause_button.isEnabled()
+    rp.start_button.click()
+    wait_until(qtbot, lambda: win.live.n_points >= 1)
+    assert rp.pause_button.isEnabled() and not rp.start_button.isEnabled()
+    rp.pause_button.click()
+    wait_until(qtbot, lambda: rp.resume_button.isEnabled())
+    assert win.engine.state.value == "paused"
+    qtbot.wait(800)  # the point in flight (2 reads of 0.25 s) completes
+    n_paused = win.live.n_points
+    qtbot.wait(500)
+    assert win.live.n_points == n_paused, "points measured while paused"
+    rp.resume_button.click()
+    wait_until(qtbot, lambda: rp.pause_button.isEnabled())  # running again
+    assert win.engine.state.value == "running" and n_paused < 6
+    with qtbot.waitSignal(win.run_finished, timeout=60_000) as blocker:
+        rp.abort_button.click()
+    assert blocker.args == ["aborted"]
+    run = read_run(tmp_path / "a.h5")
+    assert run.status == "aborted"
+    assert 0 < _done_count(tmp_path / "a.h5") < 6
+    assert rp.start_button.isEnabled() and not rp.abort_button.isEnabled()
+    if hasattr(win.instruments.world, "outputs"):  # fake bench: generator outputs off
+        assert not any(win.instruments.world.outputs.values())
+    # resume the interrupted file from the window: it completes
+    with qtbot.waitSignal(win.run_finished, timeout=60_000) as blocker:
+        assert win.start_run(tmp_path / "a.h5")
+    assert blocker.args == ["complete"]
+    assert _done_count(tmp_path / "a.h5") == 6
+
+
+def test_validation_error_shown_in_protocol_panel(qtbot: Any, window: MainWindow) -> None:
+    pp = window.protocol_panel
+    text = SMOKE.read_text()
+    pp.editor.setPlainText(text.replace("f_center: 8.92 kHz", "f_center: 8.92"))
+    qtbot.waitUntil(lambda: not pp.valid, timeout=2000)  # as you type (debounced)
+    msg = pp.status_label.text()
+    assert "smoke.yaml:5" in msg and "f_center" in msg and "unit" in msg, msg
+    assert not window.start_run()
+    assert window.engine is None
+    pp.editor.setPlainText(text.replace("cylinders: [1, 8, 16]", "cylinders: [1, 8, 99]"))
+    qtbot.waitUntil(lambda: "99" in pp.status_label.text(), timeout=2000)
+    assert not pp.valid
+    pp.editor.setPlainText(text)
+    qtbot.waitUntil(lambda: pp.valid, timeout=2000)
+    assert "6 points" in pp.status_label.text()
+
+
+def test_close_during_run_aborts_safely(qtbot: Any, tmp_path: Path) -> None:
+    win = MainWindow(None, SMOKE, assembler=make_assembler(read_sleep_s=0.1))
+    qtbot.addWidget(win)
+    win.show()
+    win.run_panel.out_edit.setText(str(tmp_path / "c.h5"))
+    asked: list[bool] = []
+    answers = iter([False, True])
+
+    def confirm() -> bool:
+        asked.append(True)
+        return next(answers)
+
+    win.confirm_close = confirm  # type: ignore[method-assign]
+    connect(qtbot, win)
+    win.run_panel.start_button.click()
+    wait_until(qtbot, lambda: win.live.n_points >= 1)
+    assert not win.close()  # answered "no": still open, still running
+    assert win.running
+    t0 = time.monotonic()
+    assert win.close()  # answered "yes": aborts, waits for the safe state
+    assert len(asked) == 2
+    assert time.monotonic() - t0 < 30
+    assert read_run(tmp_path / "c.h5").status == "aborted"
+
+
+def test_browse_finished_run_file(qtbot: Any, window: MainWindow, tmp_path: Path) -> None:
+    win = window
+    connect(qtbot, win)
+    with qtbot.waitSignal(win.run_finished, timeout=120_000):
+        win.run_panel.start_button.click()
+    fresh = MainWindow(None, None, assembler=make_assembler())
+    qtbot.addWidget(fresh)
+    with qtbot.waitCallback(timeout=30_000) as cb:
+        fresh.open_run_file(tmp_path / "run.h5", on_done=cb)
+    assert cb.args == [True]
+    assert fresh.live.n_points == 6
+    assert fresh.views.spatial.n_rows == 3
+    assert fresh.views.sweep.n_cells == 6
+
+
+@pytest.mark.parametrize("bad", ["missing.yaml"])
+def test_missing_protocol_file_is_one_line(qtbot: Any, bad: str, tmp_path: Path) -> None:
+    win = MainWindow(None, None, assembler=make_assembler())
+    qtbot.addWidget(win)
+    assert not win.load_protocol(tmp_path / bad)
+    assert bad in win.protocol_panel.status_label.text()
+
+
+def test_export_figures_from_window(qtbot: Any, window: MainWindow, tmp_path: Path) -> None:
+    win = window
+    connect(qtbot, win)
+    with qtbot.waitSignal(win.run_finished, timeout=120_000):
+        win.run_panel.start_button.click()
+    with qtbot.waitCallback(timeout=120_000) as cb:
+        win.export_figures(tmp_path / "run.h5", tmp_path / "figs", on_done=cb)
+    assert cb.args == [True], win.log_view.lines[-2:]
+    assert any((tmp_path / "figs").glob("*.png"))

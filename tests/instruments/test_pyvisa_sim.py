@@ -1,0 +1,55 @@
+"""The SCPI generator driver through the real pyvisa path, on a pyvisa-sim YAML instrument."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from instruments.errors import InstrumentError
+from instruments.keysight import GeneratorLimits, KeysightGenerator
+from instruments.transport import open_transport
+
+pytest.importorskip("pyvisa_sim")
+
+YAML = Path(__file__).with_name("keysight_sim.yaml")
+RESOURCE = "TCPIP::10.0.0.5::INSTR"
+
+
+@pytest.fixture()
+def generator() -> KeysightGenerator:
+    t = open_transport(RESOURCE, name="generator", timeout_s=0.5, backend=f"{YAML}@sim")
+    return KeysightGenerator(t, GeneratorLimits(max_piezo_V=150.0, amplifier_gain=20.0))
+
+
+def test_identity_through_pyvisa(generator: KeysightGenerator) -> None:
+    assert generator.identify().startswith("Keysight Technologies,33522B")
+    generator.wait_complete()
+
+
+def test_error_queue_through_pyvisa(generator: KeysightGenerator) -> None:
+    assert generator.errors() == []
+    generator.transport.write("BOGUS:COMMAND 1")
+    assert generator.errors() == ["-113,Undefined header"]
+    assert generator.errors() == []
+
+
+def test_terminations_and_safe_state(generator: KeysightGenerator) -> None:
+    generator.safe_state()  # the sim device knows OUTPn OFF: no error queued
+    assert generator.errors() == []
+    assert generator.transport.query("*IDN?").endswith("58-00")  # termination stripped
+
+
+def test_unknown_resource_is_a_clear_error() -> None:
+    # pyvisa-sim opens any address but nothing answers there: the identity check refuses it
+    t = open_transport(
+        "TCPIP::10.9.9.9::INSTR", name="generator", timeout_s=0.2, backend=f"{YAML}@sim"
+    )
+    gen = KeysightGenerator(t, GeneratorLimits(max_piezo_V=150.0, amplifier_gain=20.0))
+    with pytest.raises(InstrumentError, match=r"generator \(TCPIP::10.9.9.9::INSTR\)"):
+        with pytest.warns(UserWarning):
+            gen.identify()
+    with pytest.raises(InstrumentError, match=r"stage \(no-such-port\): cannot open serial port"):
+        open_transport("no-such-port", name="stage")
+    with pytest.raises(InstrumentError, match="empty instrument resource"):
+        open_transport("  ", name="vibrometer")
