@@ -100,9 +100,8 @@ def burst_samples(burst: Burst, sample_rate_Hz: float) -> NDArray[np.float64]:
     if not (math.isfinite(sample_rate_Hz) and sample_rate_Hz > 0):
         raise ValueError(f"sample rate must be > 0, got {sample_rate_Hz!r}")
     n = max(8, round(burst.duration_s * sample_rate_Hz) + 1)
-    t = np.arange(n) * (burst.duration_s / (n - 1))
+    t = np.arange(n, dtype=np.float64) * (burst.duration_s / (n - 1))
     w = burst_waveform(t, burst)
     w[0] = 0.0
     w[-1] = 0.0
     return w
-

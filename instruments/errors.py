@@ -1,12 +1,14 @@
 """Exceptions raised by instruments and their transports.
 
 Every message names the instrument and, where there is one, the command, so a one-line report
-tells the physicist what failed: ``"generator (TCPIP::10.0.0.5::INSTR): no reply to '*OPC?' within 5 s"``.
+tells the physicist what failed:
+``"generator (TCPIP::10.0.0.5::INSTR): no reply to '*OPC?' within 5 s"``.
 """
 
 from __future__ import annotations
 
 __all__ = [
+    "DriverNotInstalledError",
     "InstrumentError",
     "InstrumentTimeout",
     "LimitError",
@@ -14,7 +16,6 @@ __all__ = [
     "ReplyError",
     "SignalLostError",
     "StallError",
-    "DriverNotInstalledError",
 ]
 
 

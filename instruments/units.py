@@ -136,9 +136,8 @@ def parse_quantity(value: Any, dimension: str, *, field: str = "") -> float:
             if not math.isfinite(number):
                 raise UnitError(f"{where}value must be finite, got {value!r}")
             return number
-        raise UnitError(
-            f"{where}{value!r} has no unit; write it with one, e.g. '{value} {expected.split('/')[0]}'"
-        )
+        example = f"{value} {expected.split('/')[0]}"
+        raise UnitError(f"{where}{value!r} has no unit; write it with one, e.g. '{example}'")
     if not isinstance(value, str):
         raise UnitError(f"{where}expected a quantity string such as '8.92 kHz', got {value!r}")
     match = _QUANTITY_RE.match(value)
@@ -149,9 +148,8 @@ def parse_quantity(value: Any, dimension: str, *, field: str = "") -> float:
     if not math.isfinite(number):
         raise UnitError(f"{where}value must be finite, got {value!r}")
     if unit == "" and dimension != "dimensionless":
-        raise UnitError(
-            f"{where}{value!r} has no unit; write it with one, e.g. '{number:g} {expected.split('/')[0]}'"
-        )
+        example = f"{number:g} {expected.split('/')[0]}"
+        raise UnitError(f"{where}{value!r} has no unit; write it with one, e.g. '{example}'")
     factor = _unit_factor(unit, dimension)
     if factor is None:
         raise UnitError(f"{where}unit {unit!r} is not a {dimension} unit (use {expected})")
