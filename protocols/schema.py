@@ -43,6 +43,8 @@ __all__ = [
     "ProtocolFile",
     "load_protocol",
     "parse_protocol",
+    "resolve_protocol_path",
+    "shipped_protocols",
 ]
 
 Direction = Literal["ltr", "rtl"]
@@ -272,9 +274,34 @@ def _validate(doc: YamlDoc) -> ProtocolFile:
         raise doc.error(("amplitudes",), str(exc)) from None
 
 
+def shipped_protocols() -> dict[str, Path]:
+    """The protocol files shipped in ``protocols/``: name (file stem) -> path."""
+    here = Path(__file__).resolve().parent
+    return {p.stem: p for p in sorted(here.glob("*.yaml"))}
+
+
+def resolve_protocol_path(path: str | Path) -> Path:
+    """``path`` itself when it exists; else a shipped protocol of that name.
+
+    ``run_protocol ltr_highamp.yaml`` (or ``ltr_highamp``) run from any folder finds the shipped
+    ``protocols/ltr_highamp.yaml``; a path with a folder part is never looked up elsewhere.
+    """
+    p = Path(path)
+    if p.exists() or p.parent != Path("."):
+        return p
+    shipped = shipped_protocols()
+    stem = p.stem if p.suffix in (".yaml", ".yml") else p.name
+    return shipped.get(stem, p)
+
+
 def load_protocol(path: str | Path) -> ProtocolFile:
-    """Load and validate a protocol file; errors are one-line :class:`ConfigError`."""
-    doc = load_yaml(path)
+    """Load and validate a protocol file (a path, or the name of a shipped protocol, see
+    :func:`resolve_protocol_path`); errors are one-line :class:`ConfigError`."""
+    p = resolve_protocol_path(path)
+    if not p.exists():
+        names = ", ".join(shipped_protocols())
+        raise ConfigError(f"{path}: no such file, and no shipped protocol of that name ({names})")
+    doc = load_yaml(p)
     pf = _validate(doc)
     try:
         pf.protocol.output.format(name="x", timestamp="x", date="x")

@@ -166,3 +166,26 @@ def test_lab_bench_template_validates_without_touching_instruments() -> None:
     assert not lab.bench.simulated and lab.bench.simulation is None
     plan = make_plan(load_protocol(ROOT / "ltr_highamp.yaml"), lab)
     assert plan.n_points == 31
+
+
+def test_shipped_protocol_found_by_name_from_any_folder(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.chdir(tmp_path)
+    by_file = load_protocol("ltr_highamp.yaml")
+    by_stem = load_protocol("ltr_highamp")
+    assert by_file.protocol.name == by_stem.protocol.name == "ltr_highamp"
+    # a local file of the same name wins over the shipped one
+    local = tmp_path / "ltr_highamp.yaml"
+    local.write_text(by_file.doc.text.replace("name: ltr_highamp", "name: my_local_copy"))
+    assert load_protocol("ltr_highamp.yaml").protocol.name == "my_local_copy"
+
+
+def test_unknown_protocol_name_lists_the_shipped_ones(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(ConfigError, match=r"no shipped protocol.*smoke"):
+        load_protocol("no_such_protocol.yaml")
+    with pytest.raises(ConfigError, match="no such file"):
+        load_protocol(tmp_path / "sub" / "smoke.yaml")
