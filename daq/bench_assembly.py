@@ -138,6 +138,9 @@ def build_drivers(
     if clock is not None:
         stage_kw["clock"] = clock
     stage = zaber.ZaberStage(transports["stage"], zaber.ZaberSettings(**stage_kw))
+    # ask who they are now: a dead link fails at connect, and the snapshot records the identity
+    generator.identify()
+    vibrometer.identify()
     return generator, vibrometer, stage
 
 

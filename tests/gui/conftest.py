@@ -1,5 +1,4 @@
-"""Fixtures of the GUI tests: the bench window on the simulated bench (or, while the simulated
-bench's drivers are not installed, on the engine tests' fake instruments, said on stdout)."""
+"""Fixtures of the GUI tests: the bench window on the simulated bench."""
 
 from __future__ import annotations
 
@@ -12,9 +11,8 @@ from typing import Any
 import pytest
 from PySide6.QtCore import QElapsedTimer, QTimer
 
-from daq.bench_assembly import AssemblyError, assemble, chain_info
+from daq.bench_assembly import assemble
 from daq.gui.main_window import MainWindow
-from protocols.bench import load_bench
 
 ROOT = Path(__file__).resolve().parents[2]
 SMOKE = ROOT / "protocols" / "smoke.yaml"
@@ -28,17 +26,6 @@ def screenshots(tmp_path: Path) -> Path:
     out = Path(target) if target else tmp_path / "screenshots"
     out.mkdir(parents=True, exist_ok=True)
     return out
-
-
-def _sim_bench_available() -> bool:
-    try:
-        assemble(load_bench(None), seed=0).close()
-    except AssemblyError:
-        return False
-    return True
-
-
-SIM_AVAILABLE = _sim_bench_available()
 
 
 class SlowDigitiser:
@@ -58,26 +45,15 @@ class SlowDigitiser:
 
 
 def make_assembler(read_sleep_s: float = 0.0) -> Callable[[Any, int | None], Any]:
-    """The simulated bench; the engine tests' fakes (with the real chain) when it is missing."""
-    if SIM_AVAILABLE:
+    """The simulated bench, its digitiser slowed by ``read_sleep_s`` of wall time per read."""
 
-        def sim(bf: Any, seed: int | None) -> Any:
-            inst = assemble(bf, seed=seed)
-            if read_sleep_s:
-                inst.digitiser = SlowDigitiser(inst.digitiser, read_sleep_s)
-            return inst
-
-        return sim
-    from engine.fakes import FakeWorld, Faults, fake_bench
-
-    print("NOTE: simulated bench drivers not installed; GUI tests use the fake instruments")
-
-    def fake(bf: Any, seed: int | None) -> Any:
-        inst = fake_bench(FakeWorld(seed=seed or 0, faults=Faults(read_sleep_s=read_sleep_s)))
-        inst.chain = chain_info(bf)
+    def sim(bf: Any, seed: int | None) -> Any:
+        inst = assemble(bf, seed=seed)
+        if read_sleep_s:
+            inst.digitiser = SlowDigitiser(inst.digitiser, read_sleep_s)
         return inst
 
-    return fake
+    return sim
 
 
 @pytest.fixture

@@ -10,8 +10,6 @@ from instruments.errors import InstrumentError
 from instruments.keysight import GeneratorLimits, KeysightGenerator
 from instruments.transport import open_transport
 
-pytest.importorskip("pyvisa_sim")
-
 YAML = Path(__file__).with_name("keysight_sim.yaml")
 RESOURCE = "TCPIP::10.0.0.5::INSTR"
 
