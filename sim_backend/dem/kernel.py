@@ -15,6 +15,14 @@ measures the integrator's energy error when the damping is off.
 
 Trajectories are processed in lanes of ``W`` (same orientation), the innermost loops running
 over the lanes so that they vectorise.
+
+Optional (default off, results bit-for-bit unchanged): ``record_flags`` skips the recording of
+unrequested quantities (bit 0 velocity, 1 displacement, 2 drive; an unrequested output array is
+never touched, so it may have zero length), and ``stop_every > 0`` checks every ``stop_every``
+samples whether the energy left in each lane, ``H(t) - H_static``, is at most ``stop_fraction``
+times the input work with every lane's drive finished; when it is for every lane of a chunk, that
+chunk stops recording (``energy[r, 3]`` = samples recorded, ``energy[r, 4]`` = energy left (J),
+when ``energy`` has 5 columns).
 """
 
 from __future__ import annotations
@@ -88,6 +96,50 @@ def drive_value(
     return amp * (a + fr * (b - a)), amp * (b - a) * rate
 
 
+@numba.njit(cache=True)
+def _lane_energy(
+    q: NDArray[np.float64],  # [N, K, W]
+    p: NDArray[np.float64],  # [N, K, W]
+    u: NDArray[np.float64],  # [N, W] scratch: primary displacements of lane b on return
+    b: int,
+    phi: NDArray[np.float64],  # [N, K]
+    omega: NDArray[np.float64],  # [N, K]
+    dv: float,  # drive value (m or N)
+    kind: int,  # 0 moving wall, 1 force
+    beta: float,
+    d0: NDArray[np.float64],  # [N+1] rest overlap of each contact (m), oriented
+    f0: float,
+    far_wall: int,
+) -> float:
+    """Hamiltonian (J) of lane ``b``: block energies, Hertz contact energies and preload terms."""
+    N = q.shape[0]
+    K = q.shape[1]
+    hh = 0.0
+    for i in range(N):
+        uu = 0.0
+        for k in range(K):
+            hh += 0.5 * p[i, k, b] ** 2 + 0.5 * omega[i, k] ** 2 * q[i, k, b] ** 2
+            uu += phi[i, k] * q[i, k, b]
+        u[i, b] = uu
+    if kind == 0:
+        d = d0[0] + dv - u[0, b]
+        if d > 0.0:
+            hh += 0.4 * beta * d * d * math.sqrt(d)
+    else:
+        hh -= (f0 + dv) * u[0, b]
+    for i in range(N - 1):
+        d = d0[i + 1] + u[i, b] - u[i + 1, b]
+        if d > 0.0:
+            hh += 0.4 * beta * d * d * math.sqrt(d)
+    if far_wall == 1:
+        d = d0[N] + u[N - 1, b]
+        if d > 0.0:
+            hh += 0.4 * beta * d * d * math.sqrt(d)
+    else:
+        hh += f0 * u[N - 1, b]
+    return hh
+
+
 @numba.njit(cache=True, parallel=True)
 def run_batch(
     phi0: NDArray[np.float64],  # [2, N, K] primary component of mass-normalised block modes
@@ -110,14 +162,18 @@ def run_batch(
     n_sub: int,
     n_samples: int,
     beta: float,
-    delta0: float,
+    rest: NDArray[np.float64],  # [2, N+1] rest overlap of each contact (m): delta0 - gap
     f0: float,
     far_wall: int,
     rec_idx: NDArray[np.int64],  # [2, C] oriented indices to record
     vel: NDArray[np.float64],  # [R, C, S] out
     disp: NDArray[np.float64],  # [R, C, S] out
     drv: NDArray[np.float64],  # [R, S] out
-    energy: NDArray[np.float64],  # [R, 3] out: H(0), H(end), W
+    energy: NDArray[np.float64],  # [R, 3], [R, 5] or [R, 6] out: H(0), H(end), W
+    # (, samples, E left (, total momentum at the end, oriented))
+    record_flags: int = 7,  # bit 0 velocity, bit 1 displacement, bit 2 drive
+    stop_every: int = 0,  # > 0: check the energy left every stop_every samples
+    stop_fraction: float = 0.0,  # stop once energy left <= stop_fraction * input work
 ) -> None:
     n_chunks, W = lane_traj.shape
     N = phi0.shape[1]
@@ -128,7 +184,13 @@ def run_batch(
     for j in range(chi.shape[1]):
         if chi[0, j] > 0.0:
             damped = True
+    # every contact rests at delta0 except gaps, which the chain file allows only with F0 = 0
+    delta0 = max(rest[0].max(), 0.0)
     u0_static = 0.4 * beta * delta0 * delta0 * math.sqrt(delta0)
+    rec_vel = (record_flags & 1) != 0
+    rec_disp = (record_flags & 2) != 0
+    rec_drv = (record_flags & 4) != 0
+    n_contacts = N - 1 + far_wall
     for ch in numba.prange(n_chunks):
         o = chunk_orient[ch]
         lanes = lane_traj[ch]
@@ -148,6 +210,7 @@ def run_batch(
         ru = np.zeros(W)
         rv = np.zeros(W)
         phi = phi0[o]
+        d0 = rest[o]
         for b in range(W):
             r = lanes[b]
             if r >= 0:
@@ -156,9 +219,10 @@ def run_batch(
             else:
                 wall[b] = 1.0
         t = 0.0
+        n_rec = n_samples
         for s in range(n_samples):
             # record the state at t = s / rate
-            for c in range(C):
+            for c in range(C if (rec_vel or rec_disp) else 0):
                 i = rec_idx[o, c]
                 for b in range(W):
                     ru[b] = 0.0
@@ -171,14 +235,42 @@ def run_batch(
                 for b in range(W):
                     r = lanes[b]
                     if r >= 0:
-                        disp[r, c, s] = ru[b]
-                        vel[r, c, s] = rv[b]
-            for b in range(W):
-                r = lanes[b]
-                if r >= 0:
-                    drv[r, s] = drive_value(t, src[r], prm[r], tables[r], n_table[r])[0]
+                        if rec_disp:
+                            disp[r, c, s] = ru[b]
+                        if rec_vel:
+                            vel[r, c, s] = rv[b]
+            if rec_drv:
+                for b in range(W):
+                    r = lanes[b]
+                    if r >= 0:
+                        drv[r, s] = drive_value(t, src[r], prm[r], tables[r], n_table[r])[0]
             if s == n_samples - 1:
                 break
+            if stop_every > 0 and s > 0 and s % stop_every == 0:
+                # early stop: every lane's drive over and its energy left negligible
+                quiet = True
+                for b in range(W):
+                    r = lanes[b]
+                    if r < 0 or not quiet:
+                        continue
+                    if src[r] == 0:
+                        t_end = prm[r, 6] + prm[r, 2]
+                    else:
+                        t_end = prm[r, 6] + (n_table[r] - 1) / prm[r, 7]
+                    if prm[r, 0] != 0.0 and t <= t_end:
+                        quiet = False
+                        continue
+                    h_static = (n_contacts + (1 if dkind[r] == 0 else 0)) * u0_static
+                    left = (
+                        _lane_energy(q, p, u, b, phi, omega[o], 0.0, dkind[r], beta, d0, f0,
+                                     far_wall)
+                        - h_static
+                    )  # fmt: skip
+                    if left > stop_fraction * work[b]:
+                        quiet = False
+                if quiet:
+                    n_rec = s + 1
+                    break
             for step in range(n_sub):
                 for stage in range(m + 1):
                     # ---- drift
@@ -230,11 +322,11 @@ def run_batch(
                             ddot[b] = dd
                     # conservative Hertz forces of every contact (0: left end, N: right end)
                     for b in range(W):
-                        gap[0, b] = wall[b] * (delta0 + dval[b] - u[0, b])
-                        gap[N, b] = far_wall * (delta0 + u[N - 1, b])
+                        gap[0, b] = wall[b] * (d0[0] + dval[b] - u[0, b])
+                        gap[N, b] = far_wall * (d0[N] + u[N - 1, b])
                     for j in range(1, N):
                         for b in range(W):
-                            gap[j, b] = delta0 + u[j - 1, b] - u[j, b]
+                            gap[j, b] = d0[j] + u[j - 1, b] - u[j, b]
                     for j in range(N + 1):
                         for b in range(W):
                             d = max(gap[j, b], 0.0)
@@ -279,35 +371,20 @@ def run_batch(
                             for b in range(W):
                                 p[i, k, b] += f * force[i, b]
         # ---- energy at the end (and at the start: the static state)
-        n_contacts = N - 1 + far_wall
         for b in range(W):
             r = lanes[b]
             if r < 0:
                 continue
-            hh = 0.0
-            for i in range(N):
-                uu = 0.0
-                for k in range(K):
-                    hh += 0.5 * p[i, k, b] ** 2 + 0.5 * omega[o, i, k] ** 2 * q[i, k, b] ** 2
-                    uu += phi[i, k] * q[i, k, b]
-                u[i, b] = uu
             dv = drive_value(t, src[r], prm[r], tables[r], n_table[r])[0]
-            if dkind[r] == 0:
-                d = delta0 + dv - u[0, b]
-                if d > 0.0:
-                    hh += 0.4 * beta * d * d * math.sqrt(d)
-            else:
-                hh -= (f0 + dv) * u[0, b]
-            for i in range(N - 1):
-                d = delta0 + u[i, b] - u[i + 1, b]
-                if d > 0.0:
-                    hh += 0.4 * beta * d * d * math.sqrt(d)
-            if far_wall == 1:
-                d = delta0 + u[N - 1, b]
-                if d > 0.0:
-                    hh += 0.4 * beta * d * d * math.sqrt(d)
-            else:
-                hh += f0 * u[N - 1, b]
+            hh = _lane_energy(q, p, u, b, phi, omega[o], dv, dkind[r], beta, d0, f0, far_wall)
             energy[r, 0] = (n_contacts + (1 if dkind[r] == 0 else 0)) * u0_static
             energy[r, 1] = hh
             energy[r, 2] = work[b]
+            if energy.shape[1] >= 5:
+                energy[r, 3] = n_rec
+                energy[r, 4] = hh - energy[r, 0]
+            if energy.shape[1] >= 6:  # total momentum (kg m/s), oriented: sum_i sqrt(m_i) p_i0
+                mom = 0.0
+                for i in range(N):
+                    mom += p[i, 0, b] / phi[i, 0]
+                energy[r, 5] = mom
