@@ -19,7 +19,13 @@ and nowhere else. Layout (see the design notes)::
         done          [A, C] uint8: 0 pending, 1 measured and flushed, 2 failed
         measured_at   [A, C] float64, unix time (NaN until measured)
     /log              (time, level, message) rows, resizable
-    /simulation       (optional) attrs: integrator, step, error indicators of a DEM run
+    /simulation       (optional) attrs of the DEM behind the data: integrator, order, dt_s (s),
+                      error_estimate_rel (step-doubling estimate of the velocity error, relative
+                      L2, worst cylinder; worst run), energy_residual_rel (energy balance
+                      residual over the input work; largest magnitude), and for the simulated
+                      bench dem_runs_json: a JSON list with one entry per DEM run (direction,
+                      kind, amplitude and its units, the same indicators). ``biafc simulate``
+                      writes them at creation; the run engine when the file closes.
 
 Writing uses SWMR and flushes after every point, so a crash loses at most the point in flight
 and a reader can follow a run live. HDF5 forbids changing attributes under SWMR, so the final
@@ -338,8 +344,10 @@ class RunFileWriter:
         ds[n] = row[0]
         self._f.flush()
 
-    def close(self, status: Status) -> None:
-        """Close, writing the final ``status`` (and ``finished`` time) as root attributes."""
+    def close(self, status: Status, *, simulation: Mapping[str, Any] | None = None) -> None:
+        """Close, writing the final ``status`` (and ``finished`` time) as root attributes and
+        ``simulation`` (optional) as attributes of ``/simulation`` (created if absent; SWMR
+        forbids new attributes while writing, so they are set here)."""
         if self._closed:
             return
         if status not in STATUSES:
@@ -350,6 +358,10 @@ class RunFileWriter:
         with h5py.File(self.path, "r+", libver="latest") as f:
             f.attrs["status"] = status
             f.attrs["finished"] = _now_iso()
+            if simulation:
+                sim = f.require_group("simulation")
+                for key, value in simulation.items():
+                    sim.attrs[key] = value
 
     @property
     def closed(self) -> bool:

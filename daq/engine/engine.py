@@ -17,6 +17,7 @@ drive.
 
 from __future__ import annotations
 
+import json
 import threading
 import time
 from collections.abc import Callable
@@ -279,7 +280,7 @@ class RunEngine:
                     + ("" if not problems else f" (with {len(problems)} problem(s))"),
                 )
                 try:
-                    self._writer.close(status)  # type: ignore[arg-type]
+                    self._writer.close(status, simulation=self._simulation_attrs())  # type: ignore[arg-type]
                 except Exception as exc:
                     reason = reason or f"closing the run file failed: {exc}"
             self._set_state(RunState(status))
@@ -296,6 +297,31 @@ class RunEngine:
                 n_failed=n_failed,
             )
         return self.result
+
+    def _simulation_attrs(self) -> dict[str, Any] | None:
+        """``/simulation`` attributes of a simulated-bench run: the DEM runs served during this
+        run (each with its error estimate) and their worst indicators; ``None`` otherwise."""
+        take = getattr(self.instruments.world, "take_dem_runs", None)
+        if take is None:
+            return None
+        try:
+            runs: list[dict[str, Any]] = list(take())
+        except Exception:
+            return None
+        if not runs:
+            return None
+        err = [float(r.get("error_estimate_rel", np.nan)) for r in runs]
+        res = [float(r.get("energy_residual_rel", np.nan)) for r in runs]
+        finite = [x for x in res if np.isfinite(x)]
+        return {
+            "integrator": str(runs[0].get("integrator", "")),
+            "order": int(runs[0].get("order", 0)),
+            "dt_s": float(runs[0].get("dt_s", np.nan)),
+            "error_estimate_rel": float(np.nanmax(err)) if np.isfinite(err).any() else np.nan,
+            "energy_residual_rel": max(finite, key=abs) if finite else float("nan"),
+            "dem_runs": len(runs),
+            "dem_runs_json": json.dumps(runs, default=float),
+        }
 
     def _configure_digitiser(self) -> NDArray[np.float64]:
         """Set the vibrometer range and configure the acquisition (both before the snapshot);

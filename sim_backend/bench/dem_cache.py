@@ -12,7 +12,7 @@ import hashlib
 import time
 from collections import OrderedDict
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Literal, cast
 
 import numpy as np
@@ -46,11 +46,17 @@ class DemRecord:
         ``[C, S]`` velocity of every cylinder (m/s), cylinder order 1..N.
     drive:
         ``[S]`` the applied drive (m or N).
+    meta:
+        How it was computed and how good it is: ``integrator``, ``order``, ``dt_s`` (s),
+        ``error_estimate_rel`` (step-doubling estimate, relative L2 of the worst cylinder) and
+        ``energy_residual_rel`` (energy balance residual over the input work); empty when the
+        simulator does not say.
     """
 
     time_s: NDArray[np.float64]
     velocity_m_per_s: NDArray[np.float64]
     drive: NDArray[np.float64]
+    meta: dict[str, Any] = field(default_factory=dict)
 
 
 @dataclass
@@ -82,6 +88,7 @@ class DemRunner:
         self._cache: OrderedDict[DemKey, DemRecord] = OrderedDict()
         self._size = cache_size
         self.stats = DemStats()
+        self._served: dict[DemKey, dict[str, Any]] = {}
 
     def record(self, key: DemKey, waveform: NDArray[np.float64]) -> DemRecord:
         """The record for ``key`` (``waveform``: the normalised samples the key was made of)."""
@@ -89,6 +96,7 @@ class DemRunner:
         if hit is not None:
             self._cache.move_to_end(key)
             self.stats.cache_hits += 1
+            self._note_served(key, hit)
             return hit
         t0 = time.perf_counter()
         rec = self._simulate(key, waveform)
@@ -97,7 +105,26 @@ class DemRunner:
         self._cache[key] = rec
         while len(self._cache) > self._size:
             self._cache.popitem(last=False)
+        self._note_served(key, rec)
         return rec
+
+    def _note_served(self, key: DemKey, rec: DemRecord) -> None:
+        if rec.meta and key not in self._served:
+            self._served[key] = {
+                "direction": key.direction,
+                "kind": key.kind,
+                "amplitude": key.amplitude,
+                "amplitude_units": "m" if key.kind == "displacement" else "N",
+                **rec.meta,
+            }
+
+    def take_served(self) -> list[dict[str, Any]]:
+        """The meta of every distinct run served since the last call (direction, kind,
+        amplitude in m or N, integrator, order, dt_s, error_estimate_rel, energy_residual_rel),
+        in the order first served; clears the list."""
+        out = list(self._served.values())
+        self._served.clear()
+        return out
 
     def clear(self) -> None:
         self._cache.clear()
@@ -125,7 +152,7 @@ def dem_simulator(chain_spec: Any, integrator: str, dt_s: float | None) -> Simul
             burst=None,
             waveform=(np.asarray(waveform, dtype=np.float64), key.waveform_rate_Hz),
         )
-        kwargs: dict[str, Any] = {"integrator": integrator}
+        kwargs: dict[str, Any] = {"integrator": integrator, "error_estimate": True}
         if dt_s is not None:
             kwargs["dt_s"] = dt_s
         res = dem.simulate(
@@ -139,6 +166,13 @@ def dem_simulator(chain_spec: Any, integrator: str, dt_s: float | None) -> Simul
             time_s=np.asarray(res.time_s, dtype=np.float64),
             velocity_m_per_s=np.asarray(res.velocity[0], dtype=np.float64),
             drive=np.asarray(res.drive[0], dtype=np.float64),
+            meta={
+                "integrator": str(res.meta["integrator"]),
+                "order": int(res.meta["order"]),
+                "dt_s": float(res.meta["dt_s"]),
+                "error_estimate_rel": float(res.meta["error_estimate_rel"][0]),
+                "energy_residual_rel": float(res.meta["energy_residual_rel"][0]),
+            },
         )
 
     return simulate_key

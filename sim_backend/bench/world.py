@@ -206,6 +206,11 @@ class SimWorld:
         """DEM calls, cache hits and DEM wall seconds."""
         return self._dem.stats
 
+    def take_dem_runs(self) -> list[dict[str, Any]]:
+        """Meta (drive, integrator, step, error estimate, energy residual) of every distinct DEM
+        run served since the last call; the run engine stores them in the run file."""
+        return self._dem.take_served()
+
     # --- trigger and acquisition ----------------------------------------------------------------
     def fire_trigger(self, plays: list[ChannelPlay] | tuple[ChannelPlay, ...]) -> None:
         """The generator fired (``*TRG``): ``plays`` are the channels whose output is ON. The

@@ -1,0 +1,40 @@
+"""The simulated bench records its DEM runs' error indicators in the run file's /simulation."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from daq.cli import run_protocol as rp
+from protocols.runfile import ChainInfo, RunFileWriter, ScanSpec, read_run
+
+ROOT = Path(__file__).resolve().parents[2] / "protocols"
+
+
+def test_close_sets_simulation_attrs(tmp_path: Path) -> None:
+    chain = ChainInfo(np.ones(2), 0.01, 5.0, 1e9, np.ones((2, 1)), np.ones((2, 1)))
+    scan = ScanSpec("ltr", np.array([1.0]), "m", np.array([1, 2], np.int32), np.arange(4.0), 1e3)
+    w = RunFileWriter.create(tmp_path / "r.h5", backend="sim", chain=chain, scans=[scan])
+    w.close("complete", simulation={"integrator": "strang", "error_estimate_rel": 1e-5})
+    run = read_run(tmp_path / "r.h5")
+    assert run.status == "complete"
+    assert run.simulation == {"integrator": "strang", "error_estimate_rel": 1e-5}
+
+
+def test_sim_bench_run_file_holds_dem_error_estimates(tmp_path: Path) -> None:
+    out = tmp_path / "smoke.h5"
+    assert rp.main([str(ROOT / "smoke.yaml"), "--out", str(out), "--quiet"]) == 0
+    run = read_run(out)
+    sim = run.simulation
+    assert sim["integrator"] == "blanes-moan4" and sim["order"] == 4
+    assert 0 < sim["dt_s"] <= 2e-6
+    assert 0 < sim["error_estimate_rel"] < 1e-3
+    assert abs(sim["energy_residual_rel"]) < 1.0
+    runs = json.loads(sim["dem_runs_json"])
+    scan = run.scans["ltr"]
+    assert len(runs) == sim["dem_runs"] == len(scan.amplitudes)
+    assert {r["direction"] for r in runs} == {"ltr"}
+    assert all(r["amplitude_units"] == "m" and r["amplitude"] > 0 for r in runs)
+    assert max(r["error_estimate_rel"] for r in runs) == sim["error_estimate_rel"]
