@@ -207,8 +207,10 @@ def run_accuracy(
     unknown = [m for m in names if m not in ladders]
     if unknown:
         raise ValueError(f"unknown method(s) {unknown}; choose from {list(ladders)}")
-    ref_kwargs: dict[str, float] = {"dt0_s": 0.125e-6, "min_dt_s": 62.5e-9} if quick else {}
-    ref = converged_reference(scene, use_cache=use_cache, **ref_kwargs)
+    if quick:
+        ref = converged_reference(scene, dt0_s=0.125e-6, min_dt_s=62.5e-9, use_cache=use_cache)
+    else:
+        ref = converged_reference(scene, use_cache=use_cache)
     report = SceneReport(
         scene=scene.name,
         description=BUILTIN_SCENES.get(scene.name, "custom scene"),

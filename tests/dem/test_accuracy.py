@@ -15,10 +15,12 @@ from daq.cli.biafc import main
 from sim_backend import dem
 from sim_backend.dem.accuracy import measure_fixed, observed_order
 from sim_backend.dem.accuracy_scenes import AccuracyScene, builtin_scene
-from sim_backend.dem.converged import converged_reference
+from sim_backend.dem.converged import ConvergedReference, converged_reference
 from sim_backend.dem.errors import rel_l2
 
-QUICK_REF = {"dt0_s": 0.125e-6, "min_dt_s": 62.5e-9}
+
+def _quick_reference(scene: AccuracyScene) -> ConvergedReference:
+    return converged_reference(scene, dt0_s=0.125e-6, min_dt_s=62.5e-9)
 
 
 @pytest.fixture(autouse=True)
@@ -51,7 +53,7 @@ def test_reference_cache_miss_then_hit(_cache: Path) -> None:
 
 
 def test_observed_orders_two_and_four(highamp: AccuracyScene) -> None:
-    ref = converged_reference(highamp, **QUICK_REF)
+    ref = _quick_reference(highamp)
     for name, ladder, nominal in (
         ("strang", (0.4e-6, 0.2e-6, 0.1e-6), 2),
         ("yoshida4", (2e-6, 1e-6, 0.5e-6), 4),
@@ -72,7 +74,7 @@ def test_observed_order_ignores_floor_and_pre_asymptotic_points() -> None:
 
 @pytest.mark.parametrize(("integrator", "dt_s"), [("blanes-moan4", 2e-6), ("strang", 0.2e-6)])
 def test_error_estimate_is_honest(highamp: AccuracyScene, integrator: str, dt_s: float) -> None:
-    ref = converged_reference(highamp, **QUICK_REF)
+    ref = _quick_reference(highamp)
     res = dem.simulate(
         highamp.chain(), [highamp.drive()], duration_s=highamp.duration_s,
         sample_rate_Hz=highamp.sample_rate_Hz, integrator=integrator, dt_s=dt_s,
