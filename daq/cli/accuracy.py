@@ -106,6 +106,11 @@ def format_report(report: Any) -> str:
         for name, p in report.orders.items()
     )
     lines.append(f"   observed orders (worst cylinder): {orders}")
+    local = "; ".join(
+        f"{name} " + " ".join(f"{p:.2f}" for p in slopes)
+        for name, slopes in report.local_orders.items()
+    )
+    lines.append(f"   local orders, coarse to fine: {local}")
     return "\n".join(lines)
 
 
@@ -132,9 +137,12 @@ def plot_work_precision(reports: list[Any], path: Path) -> None:
             )
         ref = rep.reference
         ax.axhline(max(ref["change_rel"], 1e-300), color="0.6", ls=":", lw=1)
-        ax.set_title(
-            f"{rep.scene}: {rep.amplitude:g} {rep.amplitude_units}, {rep.duration_s * 1e3:g} ms"
+        amp = (
+            f"{rep.amplitude * 1e6:.3g} um"
+            if rep.amplitude_units == "m"
+            else f"{rep.amplitude:.3g} N"
         )
+        ax.set_title(f"{rep.scene}: {amp}, {rep.duration_s * 1e3:g} ms")
         ax.set_xlabel("wall time (s, one trajectory)")
         ax.set_ylabel("relative L2 error of velocity, worst cylinder")
         ax.grid(True, which="both", alpha=0.3)

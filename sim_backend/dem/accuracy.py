@@ -14,6 +14,7 @@ times the reference's own last change).
 
 from __future__ import annotations
 
+import itertools
 import math
 import time
 from dataclasses import asdict, dataclass, field
@@ -82,7 +83,8 @@ class Measurement:
 @dataclass
 class SceneReport:
     """Everything measured on one scene; ``orders``: observed order per fixed-step method
-    (``None`` when fewer than two points lie in the asymptotic range)."""
+    (``None`` when fewer than two points lie in the asymptotic range); ``local_orders``: the
+    slope between each pair of neighbouring steps of the ladder."""
 
     scene: str
     description: str
@@ -93,6 +95,7 @@ class SceneReport:
     reference: dict[str, Any]
     measurements: list[Measurement] = field(default_factory=list)
     orders: dict[str, float | None] = field(default_factory=dict)
+    local_orders: dict[str, list[float]] = field(default_factory=dict)
     nominal_orders: dict[str, int] = field(default_factory=dict)
 
     def as_dict(self) -> dict[str, Any]:
@@ -233,4 +236,8 @@ def run_accuracy(
             report.orders[name] = observed_order(
                 [m.setting for m in rows], [m.err_worst for m in rows], ref.change_rel
             )
+            report.local_orders[name] = [
+                math.log(a.err_worst / b.err_worst) / math.log(a.setting / b.setting)
+                for a, b in itertools.pairwise(rows)
+            ]
     return report
