@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -75,6 +75,9 @@ DEFAULT_DT_S: dict[str, float] = {
 #: mode is 82 kHz); stiffer blocks (more modes, shorter cylinders) get proportionally smaller steps
 DEFAULT_DT_TOP_HZ = 85.0e3
 DEFAULT_SAMPLE_RATE_HZ = 500.0e3
+#: quantities :func:`simulate` can record
+RECORDABLE = ("velocity", "displacement", "drive")
+_RECORD_BITS = {"velocity": 1, "displacement": 2, "drive": 4}
 
 # numba's default (workqueue) threading layer must not be entered from two threads at once
 _KERNEL_LOCK = threading.Lock()
@@ -189,6 +192,9 @@ def simulate(
     integrator: str = "default",
     dt_s: float | None = None,
     error_estimate: bool = False,
+    record: Collection[str] = RECORDABLE,
+    stop_energy_fraction: float | None = None,
+    stop_check_s: float = 0.5e-3,
 ) -> SimResult:
     """Simulate every drive of ``drives`` on ``chain`` (one compiled batch, parallel over drives).
 
@@ -205,6 +211,13 @@ def simulate(
     error_estimate: also rerun the batch at step 2h (about half the cost again) and put the
         step-doubling estimate of the velocity error in ``meta["error_estimate_rel"]`` ([R],
         relative L2 of the worst cylinder, see :func:`sim_backend.dem.errors.step_doubling_error`).
+    record: the quantities to keep, a subset of :data:`RECORDABLE`; the others are not allocated
+        (zero-length last axis in the result) nor computed.
+    stop_energy_fraction: ``None`` (default: run the whole window) or ``eps``: stop once every
+        drive is over and the energy left in the chain, ``H(t) - H_static``, is at most ``eps``
+        times the input work (checked every ``stop_check_s`` s). The result is then truncated at
+        the last trajectory's stop; a trajectory of the batch that stopped earlier holds NaN
+        after its own stop (``meta["samples_computed"]`` [R]; ``meta["energy_left_rel"]`` [R]).
     """
     t_wall = time.perf_counter()
     name = DEFAULT_INTEGRATOR if integrator == "default" else integrator
@@ -273,10 +286,19 @@ def simulate(
             n_table[r] = samples.size
             prm[r, 7] = d.waveform[1]
     C = rec.size
-    vel = np.empty((R, C, n_samples))
-    disp = np.empty((R, C, n_samples))
-    drv = np.empty((R, n_samples))
-    energy = np.zeros((R, 3))
+    if any(q not in _RECORD_BITS for q in record):
+        raise ValueError(f"record: choose from {RECORDABLE}, got {tuple(record)!r}")
+    rec_flags = sum(bit for q, bit in _RECORD_BITS.items() if q in record)
+    n_kept = {q: n_samples if q in record else 0 for q in RECORDABLE}  # unrequested: not allocated
+    vel = np.empty((R, C, n_kept["velocity"]))
+    disp = np.empty((R, C, n_kept["displacement"]))
+    drv = np.empty((R, n_kept["drive"]))
+    stop_every = 0
+    if stop_energy_fraction is not None:
+        if not (math.isfinite(stop_energy_fraction) and stop_energy_fraction > 0):
+            raise ValueError(f"stop_energy_fraction must be > 0, got {stop_energy_fraction!r}")
+        stop_every = max(1, round(stop_check_s * sample_rate_Hz))
+    energy = np.zeros((R, 5))
     lane_traj, chunk_orient = _lanes(orient)
     with _KERNEL_LOCK:
         run_batch(
@@ -286,7 +308,15 @@ def simulate(
             np.asarray(seq, dtype=np.int64), int(merge),
             h, n_sub, n_samples, chain.beta_c, chain.delta0_m, chain.f0_N,
             1 if chain.far_end == "wall" else 0, rec_idx, vel, disp, drv, energy,
+            rec_flags, stop_every, float(stop_energy_fraction or 0.0),
         )  # fmt: skip
+    n_done = energy[:, 3].astype(np.int64)
+    if stop_every > 0:
+        n_samples = int(n_done.max())
+        vel, disp, drv = vel[..., :n_samples], disp[..., :n_samples], drv[..., :n_samples]
+        for r in np.flatnonzero(n_done < n_samples):
+            for a in (vel[r], disp[r], drv[r]):
+                a[..., n_done[r] :] = np.nan
     flip = orient == 1
     vel[flip] *= -1.0
     disp[flip] *= -1.0
@@ -307,6 +337,11 @@ def simulate(
         "finite": bool(np.all(np.isfinite(vel))),
         "wall_s": time.perf_counter() - t_wall,
     }
+    if stop_every > 0:
+        meta["finite"] = bool(all(np.all(np.isfinite(vel[r, :, : n_done[r]])) for r in range(R)))
+        meta["samples_computed"] = n_done
+        meta["energy_left_rel"] = energy[:, 4] / scale
+        meta["stop_energy_fraction"] = stop_energy_fraction
     if error_estimate and vel.shape[-1] > 0:
         # the rerun at 2h records every other sample (rate / 2 keeps n_sub, so its step is 2h)
         coarse = simulate(
