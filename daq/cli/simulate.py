@@ -1,5 +1,9 @@
 """``biafc simulate --direction ltr|rtl --amplitude 2um|12N --out RUN.h5``: one DEM run.
 
+``--explain`` prints the scene's plan (:mod:`sim_backend.dem.scene`: which resonators, contact
+model, window and outputs the run needs, with error bounds and savings) and exits without
+running; ``--out`` is then not needed. A run itself always uses the full model.
+
 The amplitude's unit picks the drive: a length (``2 um``) is the peak displacement of the
 actuator, a moving Hertz wall; a force (``12 N``) is the peak force on the end cylinder. The run
 is written in the run-file layout (backend ``"dem"``, one amplitude, every cylinder done) and a
@@ -29,7 +33,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--amplitude", required=True, help="burst peak with unit: '2um' (displacement) or '12N'"
     )
-    parser.add_argument("--out", required=True, type=Path, help="run file to create (.h5)")
+    parser.add_argument(
+        "--out", type=Path, help="run file to create (.h5); required unless --explain"
+    )
     parser.add_argument("--chain", type=Path, help="chain file (YAML); default: the paper's")
     parser.add_argument("--frequency", help="burst centre frequency (default 8.92 kHz / 6.63 kHz)")
     parser.add_argument("--cycles", type=float, default=5.0, help="burst cycles (default 5)")
@@ -38,6 +44,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--integrator", default="default", help="integrator name")
     parser.add_argument("--dt", help="integrator step with unit (default: the integrator's)")
     parser.add_argument("--bands", type=int, default=3, help="bands stored in /chain")
+    parser.add_argument(
+        "--explain",
+        action="store_true",
+        help="print what the scene needs (modes, nonlinearity, time, output: kept or dropped, "
+        "why, error bound, saving) and exit without running",
+    )
     parser.add_argument(
         "--no-error-estimate",
         action="store_true",
@@ -109,7 +121,9 @@ def run(args: argparse.Namespace) -> int:
         raise CliError("--duration, --rate and --dt must be > 0")
     if not (math.isfinite(args.cycles) and args.cycles > 0):
         raise CliError("--cycles: must be > 0")
-    if args.out.exists():
+    if args.out is None and not args.explain:
+        raise CliError("--out: required (or --explain to print the scene's plan only)")
+    if args.out is not None and args.out.exists():
         raise CliError(f"--out: {args.out} exists already")
     try:
         spec = dem.load_chain_spec(args.chain) if args.chain else dem.default_chain_spec()
@@ -123,6 +137,12 @@ def run(args: argparse.Namespace) -> int:
     bands = dem.quasi_bands(chain, args.bands)
     burst = Burst(f_c if f_c is not None else DEFAULT_F_HZ[args.direction], cycles=args.cycles)
     drive = dem.Drive(direction=args.direction, kind=kind, amplitude=amplitude, burst=burst)
+    if args.explain:  # the plan only: sim_backend.dem.scene decides, nothing runs
+        from sim_backend.dem.scene import Scene, plan_scene
+
+        scene = Scene(chain, (drive,), duration, rate, record=("velocity", "drive"))
+        print(plan_scene(scene).explain())
+        return 0
     res = dem.simulate(
         chain, [drive], duration_s=duration, sample_rate_Hz=rate,
         integrator=args.integrator, dt_s=dt, error_estimate=not args.no_error_estimate,
