@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -39,6 +40,8 @@ class Chain:
     contact_damping_ratio: contact dashpot ratio, c = 2 zeta sqrt(K m0) per contact.
     far_end: "wall" or "free".
     material: the material.
+    rest_overlap_m: [N+1] overlap at rest (m) of each contact (drive wall-#1, #1-#2, ...,
+        #N-far wall): delta0, minus the gap where the chain file sets one (negative = open).
     """
 
     spec: ChainSpec
@@ -59,6 +62,16 @@ class Chain:
     contact_damping_ratio: float
     far_end: str
     material: Material
+    rest_overlap_m: NDArray[np.float64]
+
+    def hunt_crossley_chi_s_per_m(self) -> NDArray[np.float64]:
+        """[N+1] Hunt-Crossley factor chi = c / F0 (s/m) of each contact, so that the contact
+        force is ``beta d^1.5 (1 + chi d')``; 0 where there is no dashpot (also at F0 = 0, where
+        the spec requires ``contact_ratio = 0``)."""
+        dash = self.contact_dashpot_Ns_per_m()
+        if self.f0_N > 0:
+            return dash / self.f0_N
+        return np.zeros_like(dash)
 
     def contact_dashpot_Ns_per_m(self) -> NDArray[np.float64]:
         """[N+1] dashpot coefficient (N s/m) of each contact: wall-#1, #1-#2, ..., #N-wall."""
@@ -84,13 +97,24 @@ def build_chain(spec: ChainSpec) -> Chain:
     m0 = np.empty(n)
     mres = np.empty((n, J))
     omega = np.empty((n, J))
+    factors = spec.density_factors or {}
     for i, L in enumerate(lengths):
-        modes = beam_modes(float(L), spec.diameter, material, J, spec.beam_theory)
+        mat = material
+        f = factors.get(i + 1, 1.0)
+        if f != 1.0:  # a denser (heavier) cylinder of the same stiffness
+            mat = dataclasses.replace(material, density_kg_per_m3=material.density_kg_per_m3 * f)
+        modes = beam_modes(float(L), spec.diameter, mat, J, spec.beam_theory)
         mass[i] = modes.mass_kg
         m0[i] = modes.residual_mass_kg
         mres[i] = modes.modal_mass_kg
         omega[i] = modes.omega_rad_s
     beta = hertz_beta(spec.diameter, material)
+    if spec.contact_stiffness_factor != 1.0:
+        beta *= spec.contact_stiffness_factor
+    delta0 = static_overlap(spec.preload, beta)
+    rest = np.full(n + 1, delta0)
+    for k, g in (spec.contact_gaps or {}).items():
+        rest[k] = delta0 - g
     chain = Chain(
         spec=spec,
         n=n,
@@ -99,7 +123,7 @@ def build_chain(spec: ChainSpec) -> Chain:
         diameter_m=spec.diameter,
         f0_N=spec.preload,
         beta_c=beta,
-        delta0_m=static_overlap(spec.preload, beta),
+        delta0_m=delta0,
         K_lin=linear_stiffness(spec.preload, beta),
         mass_kg=mass,
         m0_kg=m0,
@@ -110,8 +134,9 @@ def build_chain(spec: ChainSpec) -> Chain:
         contact_damping_ratio=spec.damping.contact_ratio,
         far_end=spec.far_end,
         material=material,
+        rest_overlap_m=rest,
     )
-    for arr in (lengths, mass, m0, mres, omega, chain.k_res_N_per_m):
+    for arr in (lengths, mass, m0, mres, omega, chain.k_res_N_per_m, rest):
         arr.setflags(write=False)
     if len(_CACHE) > 256:
         _CACHE.clear()

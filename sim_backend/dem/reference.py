@@ -9,6 +9,7 @@ cylinder), ``y = [x, x']``. Results are oriented; flip index and sign for ``rtl`
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 import numpy as np
@@ -50,11 +51,16 @@ def linear_matrices(
             K[a, b_] -= kr[i, j]
             K[b_, a] -= kr[i, j]
     dash = chain.contact_dashpot_Ns_per_m()
+    rest = chain.rest_overlap_m
     if direction == "rtl":
         dash = dash[::-1]
-    kc = chain.K_lin
+        rest = rest[::-1]
     for jc in range(N + 1):
         left, right = jc - 1, jc
+        # a contact open at rest (a gap) has no linear stiffness
+        kc = chain.K_lin if rest[jc] == chain.delta0_m else 1.5 * chain.beta_c * math.sqrt(
+            max(float(rest[jc]), 0.0)
+        )
         for mat, val in ((K, kc), (C, dash[jc])):
             if jc == 0:
                 if drive_kind == "displacement":
@@ -121,8 +127,12 @@ def make_rhs(
         Cc[N - 1, N - 1] += dash[N]
     Cres = C - Cc
     minv = 1.0 / np.diag(M)
-    chi = dash / chain.f0_N
-    beta, d0, f0 = chain.beta_c, chain.delta0_m, chain.f0_N
+    chi = chain.hunt_crossley_chi_s_per_m()
+    d0 = chain.rest_overlap_m  # [N+1] rest overlap of each contact (gaps: negative)
+    if drive.direction == "rtl":
+        chi = chi[::-1]
+        d0 = d0[::-1]
+    beta, f0 = chain.beta_c, chain.f0_N
     eps = 1e-7 / max(drive.burst.f_center_Hz if drive.burst else 1e4, 1.0)
 
     def drive_at(t: float) -> tuple[float, float]:
@@ -139,15 +149,15 @@ def make_rhs(
         u, ud = x[:N], v[:N]
         f = -(Kb @ x) - (Cres @ v)
         val, dval = drive_at(t)
-        inner = hc(d0 + u[:-1] - u[1:], ud[:-1] - ud[1:], chi[1:N])
+        inner = hc(d0[1:N] + u[:-1] - u[1:], ud[:-1] - ud[1:], chi[1:N])
         f[: N - 1] -= inner
         f[1:N] += inner
         if drive.kind == "displacement":
-            f[0] += float(hc(np.array([d0 + val - u[0]]), np.array([dval - ud[0]]), chi[:1])[0])
+            f[0] += float(hc(np.array([d0[0] + val - u[0]]), np.array([dval - ud[0]]), chi[:1])[0])
         else:
             f[0] += f0 + val
         if chain.far_end == "wall":
-            f[N - 1] -= float(hc(np.array([d0 + u[-1]]), np.array([ud[-1]]), chi[N:])[0])
+            f[N - 1] -= float(hc(np.array([d0[N] + u[-1]]), np.array([ud[-1]]), chi[N:])[0])
         else:
             f[N - 1] -= f0
         return np.concatenate([v, f * minv])

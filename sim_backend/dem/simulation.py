@@ -17,6 +17,7 @@ from sim_backend.dem.chain import Chain
 from sim_backend.dem.drive import Drive
 from sim_backend.dem.errors import step_doubling_error
 from sim_backend.dem.kernel import drift_coefficients, run_batch
+from sim_backend.dem.step_limit import StepTooLargeError, check_step
 
 __all__ = [
     "DEFAULT_DT_S",
@@ -25,6 +26,7 @@ __all__ = [
     "INTEGRATORS",
     "BlockModes",
     "SimResult",
+    "StepTooLargeError",
     "block_modes",
     "simulate",
 ]
@@ -195,6 +197,7 @@ def simulate(
     record: Collection[str] = RECORDABLE,
     stop_energy_fraction: float | None = None,
     stop_check_s: float = 0.5e-3,
+    refuse_unstable: bool = True,
 ) -> SimResult:
     """Simulate every drive of ``drives`` on ``chain`` (one compiled batch, parallel over drives).
 
@@ -208,6 +211,10 @@ def simulate(
     integrator: a key of :data:`INTEGRATORS` or ``"default"`` (:data:`DEFAULT_INTEGRATOR`).
     dt_s: the integrator step (s); default :data:`DEFAULT_DT_S` of the integrator, scaled down by
         ``DEFAULT_DT_TOP_HZ / f_top`` when the stiffest block mode ``f_top`` is above it.
+        An explicit step that is linearly unstable for this chain and integrator (see
+        :mod:`sim_backend.dem.step_limit`) raises :class:`StepTooLargeError` (a ``ValueError``)
+        whose message gives the largest stable step (``refuse_unstable=False`` skips the check,
+        to measure that such a step really blows up).
     error_estimate: also rerun the batch at step 2h (about half the cost again) and put the
         step-doubling estimate of the velocity error in ``meta["error_estimate_rel"]`` ([R],
         relative L2 of the worst cylinder, see :func:`sim_backend.dem.errors.step_doubling_error`).
@@ -241,6 +248,8 @@ def simulate(
     period = 1.0 / sample_rate_Hz
     n_sub = max(1, math.ceil(period / dt_req - 1e-9))
     h = period / n_sub
+    if dt_s is not None and refuse_unstable:  # an explicit step: refuse a linearly unstable one
+        check_step(chain, name, h, drives)
     n_samples = math.floor(duration_s * sample_rate_Hz + 1e-9) + 1
 
     N, K = modes.phi0.shape
@@ -248,12 +257,12 @@ def simulate(
     zeta[:, 0] = 0.0
     sizes, seq, merge = _scheme(a_w)
     drift = np.stack([drift_coefficients(modes.omega, zeta, s * h) for s in sizes])
-    dash = chain.contact_dashpot_Ns_per_m()
     phi0 = np.stack([modes.phi0, modes.phi0[::-1]])
     omega = np.stack([modes.omega, modes.omega[::-1]])
     drift2 = np.stack([drift, drift[:, ::-1]])
-    chi = dash / chain.f0_N
+    chi = chain.hunt_crossley_chi_s_per_m()
     chi2 = np.stack([chi, chi[::-1]])
+    rest = np.stack([chain.rest_overlap_m, chain.rest_overlap_m[::-1]])
     rec = _cylinder_indices(chain, cylinders)
     rec_idx = np.stack([rec, chain.n - 1 - rec])
 
@@ -298,7 +307,7 @@ def simulate(
         if not (math.isfinite(stop_energy_fraction) and stop_energy_fraction > 0):
             raise ValueError(f"stop_energy_fraction must be > 0, got {stop_energy_fraction!r}")
         stop_every = max(1, round(stop_check_s * sample_rate_Hz))
-    energy = np.zeros((R, 5))
+    energy = np.zeros((R, 6))
     lane_traj, chunk_orient = _lanes(orient)
     with _KERNEL_LOCK:
         run_batch(
@@ -306,7 +315,7 @@ def simulate(
             dkind, src, prm, tables, n_table,
             np.asarray(b_w, dtype=np.float64), np.asarray(a_w, dtype=np.float64),
             np.asarray(seq, dtype=np.int64), int(merge),
-            h, n_sub, n_samples, chain.beta_c, chain.delta0_m, chain.f0_N,
+            h, n_sub, n_samples, chain.beta_c, rest, chain.f0_N,
             1 if chain.far_end == "wall" else 0, rec_idx, vel, disp, drv, energy,
             rec_flags, stop_every, float(stop_energy_fraction or 0.0),
         )  # fmt: skip
@@ -335,6 +344,7 @@ def simulate(
         "energy_gain_J": gain,
         "energy_residual_rel": (gain - work) / scale,
         "finite": bool(np.all(np.isfinite(vel))),
+        "momentum_end_kg_m_s": np.where(flip, -energy[:, 5], energy[:, 5]),
         "wall_s": time.perf_counter() - t_wall,
     }
     if stop_every > 0:

@@ -13,12 +13,22 @@ Example (the default chain, ``sim_backend/dem/chains/default.yaml``)::
     far_end: wall            # wall (rigid Hertz wall) | free (constant preload force)
     damping: {resonator_ratio: 0.002, contact_ratio: 0.005}
 
+Optional, for stiff and extreme variants (``biafc stability``); absent = the plain chain:
+
+    contact_stiffness_factor: 11.18  # multiplies beta_c (K at fixed F0 scales as factor^(2/3))
+    density_factors: {16: 10}        # cylinder number -> density factor (mass x f, w_j / sqrt(f))
+    contact_gaps: {16: 2 um}         # contact number k (#k-#k+1) -> gap at rest; needs preload 0 N
+
+``preload: 0 N`` is allowed (no pre-compression, zero linear stiffness: the "sonic vacuum"); the
+contact dashpot is the linearised one at the preload, so it then needs ``contact_ratio: 0``.
+
 ``lengths: [90 mm, 91 mm, ...]`` may replace ``n_cylinders``/``length_first``/``length_last``.
 A bad file raises :class:`ChainFileError` with one line naming the file and the field.
 """
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Any, Literal
 
@@ -88,7 +98,7 @@ class ChainSpec(BaseModel):
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
-    n_cylinders: int | None = Field(default=None, ge=2, le=10_000)
+    n_cylinders: int | None = Field(default=None, ge=1, le=10_000)
     length_first: Length | None = None
     length_last: Length | None = None
     lengths: tuple[Length, ...] | None = None
@@ -99,20 +109,55 @@ class ChainSpec(BaseModel):
     material: MaterialSpec = MaterialSpec()
     far_end: Literal["wall", "free"] = "wall"
     damping: DampingSpec = DampingSpec()
+    contact_stiffness_factor: float = Field(default=1.0, gt=0.0, le=1.0e6)
+    density_factors: dict[int, float] | None = None
+    contact_gaps: dict[int, Length] | None = None
 
-    @field_validator("length_first", "length_last", "diameter", "preload")
+    @field_validator("length_first", "length_last", "diameter")
     @classmethod
     def _positive(cls, v: float | None) -> float | None:
         if v is not None and not v > 0:
             raise ValueError("must be > 0")
         return v
 
+    @field_validator("preload")
+    @classmethod
+    def _non_negative(cls, v: float) -> float:
+        if not (math.isfinite(v) and v >= 0):
+            raise ValueError("must be >= 0")
+        return v
+
+    @field_validator("contact_stiffness_factor")
+    @classmethod
+    def _finite(cls, v: float) -> float:
+        if not math.isfinite(v):
+            raise ValueError("must be finite")
+        return v
+
+    @field_validator("density_factors")
+    @classmethod
+    def _density_factors(cls, v: dict[int, float] | None) -> dict[int, float] | None:
+        if v is not None:
+            for k, f in v.items():
+                if not (math.isfinite(f) and 0 < f <= 1.0e6):
+                    raise ValueError(f"factor of cylinder #{k} must be in (0, 1e6]")
+        return v
+
+    @field_validator("contact_gaps")
+    @classmethod
+    def _gaps(cls, v: dict[int, float] | None) -> dict[int, float] | None:
+        if v is not None:
+            for k, g in v.items():
+                if not (math.isfinite(g) and g >= 0):
+                    raise ValueError(f"gap of contact {k} must be >= 0")
+        return v
+
     @field_validator("lengths")
     @classmethod
     def _lengths_positive(cls, v: tuple[float, ...] | None) -> tuple[float, ...] | None:
         if v is not None:
-            if len(v) < 2:
-                raise ValueError("needs at least 2 cylinders")
+            if len(v) < 1:
+                raise ValueError("needs at least 1 cylinder")
             for i, x in enumerate(v):
                 if not x > 0:
                     raise ValueError(f"length of cylinder #{i + 1} must be > 0")
@@ -126,6 +171,23 @@ class ChainSpec(BaseModel):
                 raise ValueError("give either lengths or n_cylinders/length_first/length_last")
         elif any(x is None for x in graded):
             raise ValueError("give lengths, or all of n_cylinders, length_first, length_last")
+        n = self.n
+        for k in self.density_factors or {}:
+            if not 1 <= k <= n:
+                raise _FieldError("density_factors", f"cylinder #{k} is not in 1..{n}")
+        for k in self.contact_gaps or {}:
+            if not 1 <= k <= n - 1:
+                raise _FieldError("contact_gaps", f"contact {k} is not in 1..{n - 1} (#k-#k+1)")
+        if self.contact_gaps and any(g > 0 for g in self.contact_gaps.values()):
+            if self.preload > 0:
+                raise _FieldError(
+                    "contact_gaps", "needs preload 0 N (a preloaded chain cannot rest open)"
+                )
+        if self.preload == 0 and self.damping.contact_ratio > 0:
+            raise _FieldError(
+                "damping.contact_ratio",
+                "must be 0 with preload 0 N (the dashpot is the linearised one at the preload)",
+            )
         return self
 
     def lengths_m(self) -> NDArray[np.float64]:
@@ -158,14 +220,29 @@ class ChainSpec(BaseModel):
             "far_end": self.far_end,
             "damping": self.damping.model_dump(),
         }
+        if self.contact_stiffness_factor != 1.0:
+            data["contact_stiffness_factor"] = self.contact_stiffness_factor
+        if self.density_factors:
+            data["density_factors"] = dict(self.density_factors)
+        if self.contact_gaps:
+            data["contact_gaps"] = {k: f"{g * 1e6:.9g} um" for k, g in self.contact_gaps.items()}
         return yaml.safe_dump(data, sort_keys=False)
+
+
+class _FieldError(ValueError):
+    """A cross-field error of :class:`ChainSpec` that names its field (``field: message``)."""
+
+    def __init__(self, field: str, message: str) -> None:
+        super().__init__(f"{field}: {message}")
 
 
 def _first_error(exc: ValidationError) -> str:
     err = exc.errors()[0]
-    loc = ".".join(str(p) for p in err.get("loc", ())) or "(top level)"
+    loc = ".".join(str(p) for p in err.get("loc", ()))
     msg = str(err.get("msg", "invalid"))
     msg = msg.removeprefix("Value error, ")
+    if not loc:  # a cross-field check: its message names the field (or the top level)
+        return msg if isinstance(err.get("ctx", {}).get("error"), _FieldError) else f"(top level): {msg}"
     if err.get("type") == "extra_forbidden":
         msg = "unknown key"
     return f"{loc}: {msg}"
