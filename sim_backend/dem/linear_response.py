@@ -138,7 +138,7 @@ def _unit_response(
     h = period / n_up
     s_last = min(math.ceil(drive_end_s(drive) / period - 1e-9), t_s.size - 1)
     n_fine = s_last * n_up + 1
-    t_fine = np.arange(n_fine) * h
+    t_fine = np.arange(n_fine, dtype=np.float64) * h
     unit = Drive(drive.direction, drive.kind, 1.0, drive.burst, drive.waveform, drive.delay_s)
     a_fine = unit.value(t_fine)
     e, w0, w1 = _foh_weights(lam, h)

@@ -64,8 +64,8 @@ __all__ = [
     "ENERGY_PROFILE_FACTOR",
     "Decision",
     "Scene",
-    "SceneResult",
     "ScenePlan",
+    "SceneResult",
     "SceneTolerances",
     "full_plan",
     "linearisation_error",
@@ -238,9 +238,7 @@ def _kernel_cost(chain: Chain) -> float:
     return chain.n * (chain.n_modes + 1) / dt
 
 
-def _plan_modes(
-    scene: Scene, tol: SceneTolerances, linear_regime: bool
-) -> tuple[Chain, Decision]:
+def _plan_modes(scene: Scene, tol: SceneTolerances, linear_regime: bool) -> tuple[Chain, Decision]:
     chain = scene.chain
     J = chain.n_modes
     f_top = max(drive_top_frequency_Hz(d, tol.n_sigma) for d in scene.drives)
@@ -312,7 +310,7 @@ def plan_scene(
         time_d = Decision(
             "time", True, f"stop once energy left <= {stop:.2g} of the input work",
             "after the stop the record is truncated (no sample invented); later velocities are "
-            "bounded by sqrt(2 E_left / m0)", stop, "the window after the stop (known after the run)",
+            "bounded by sqrt(2 E_left / m0)", stop, "the window after the stop (known after run)",
         )  # fmt: skip
     full_bytes = len(scene.drives) * scene.n_samples * 8 * (2 * chain.n + 1)
     per = {"velocity": scene.n_recorded, "displacement": scene.n_recorded, "drive": 1}

@@ -323,9 +323,9 @@ def simulate(
     if stop_every > 0:
         n_samples = int(n_done.max())
         vel, disp, drv = vel[..., :n_samples], disp[..., :n_samples], drv[..., :n_samples]
-        for r in np.flatnonzero(n_done < n_samples):
-            for a in (vel[r], disp[r], drv[r]):
-                a[..., n_done[r] :] = np.nan
+        for r_stop in np.flatnonzero(n_done < n_samples):
+            for a in (vel[r_stop], disp[r_stop], drv[r_stop]):
+                a[..., n_done[r_stop] :] = np.nan
     flip = orient == 1
     vel[flip] *= -1.0
     disp[flip] *= -1.0
