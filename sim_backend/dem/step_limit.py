@@ -209,13 +209,23 @@ def _overlaps(chain: Chain, overlap_m: float | None) -> tuple[float, ...]:
     return tuple(out)
 
 
+_STABLE_CACHE: dict[tuple[str, str, float, tuple[float, ...]], bool] = {}
+
+
 def is_stable(chain: Chain, integrator: str, h: float, overlap_m: float | None = None) -> bool:
     """Whether step ``h`` (s) is linearly stable with the contacts at ``delta0`` and at
-    ``overlap_m`` (m; default :func:`reference_overlap_m` without drives)."""
-    return all(
-        spectral_radius(chain, integrator, h, d) <= 1.0 + STABILITY_TOL
-        for d in _overlaps(chain, overlap_m)
-    )
+    ``overlap_m`` (m; default :func:`reference_overlap_m` without drives). Cached."""
+    overlaps = _overlaps(chain, overlap_m)
+    key = (chain.spec.model_dump_json(), integrator, h, overlaps)
+    hit = _STABLE_CACHE.get(key)
+    if hit is None:
+        hit = all(
+            spectral_radius(chain, integrator, h, d) <= 1.0 + STABILITY_TOL for d in overlaps
+        )
+        if len(_STABLE_CACHE) > 4096:
+            _STABLE_CACHE.clear()
+        _STABLE_CACHE[key] = hit
+    return hit
 
 
 _LIMIT_CACHE: dict[tuple[str, str, tuple[float, ...]], StepLimit] = {}
