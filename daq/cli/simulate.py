@@ -23,6 +23,7 @@ from numpy.typing import NDArray
 
 from daq.cli.biafc import CliError
 from instruments.units import UnitError, parse_quantity
+from sim_backend.dem.step_limit import StepTooLargeError
 
 #: the paper's input frequencies
 DEFAULT_F_HZ = {"ltr": 8.92e3, "rtl": 6.63e3}
@@ -143,10 +144,13 @@ def run(args: argparse.Namespace) -> int:
         scene = Scene(chain, (drive,), duration, rate, record=("velocity", "drive"))
         print(plan_scene(scene).explain())
         return 0
-    res = dem.simulate(
-        chain, [drive], duration_s=duration, sample_rate_Hz=rate,
-        integrator=args.integrator, dt_s=dt, error_estimate=not args.no_error_estimate,
-    )  # fmt: skip
+    try:
+        res = dem.simulate(
+            chain, [drive], duration_s=duration, sample_rate_Hz=rate,
+            integrator=args.integrator, dt_s=dt, error_estimate=not args.no_error_estimate,
+        )  # fmt: skip
+    except StepTooLargeError as exc:
+        raise CliError(f"--dt: {exc}") from None
     meta = res.meta
     if not meta["finite"]:
         raise CliError("simulation diverged (non-finite velocity); try a smaller --dt")
