@@ -58,8 +58,10 @@ def linear_matrices(
     for jc in range(N + 1):
         left, right = jc - 1, jc
         # a contact open at rest (a gap) has no linear stiffness
-        kc = chain.K_lin if rest[jc] == chain.delta0_m else 1.5 * chain.beta_c * math.sqrt(
-            max(float(rest[jc]), 0.0)
+        kc = (
+            chain.K_lin
+            if rest[jc] == chain.delta0_m
+            else 1.5 * chain.beta_c * math.sqrt(max(float(rest[jc]), 0.0))
         )
         for mat, val in ((K, kc), (C, dash[jc])):
             if jc == 0:

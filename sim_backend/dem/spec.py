@@ -242,7 +242,11 @@ def _first_error(exc: ValidationError) -> str:
     msg = str(err.get("msg", "invalid"))
     msg = msg.removeprefix("Value error, ")
     if not loc:  # a cross-field check: its message names the field (or the top level)
-        return msg if isinstance(err.get("ctx", {}).get("error"), _FieldError) else f"(top level): {msg}"
+        return (
+            msg
+            if isinstance(err.get("ctx", {}).get("error"), _FieldError)
+            else f"(top level): {msg}"
+        )
     if err.get("type") == "extra_forbidden":
         msg = "unknown key"
     return f"{loc}: {msg}"

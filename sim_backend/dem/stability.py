@@ -98,7 +98,11 @@ def choose_step(
     lim = largest_stable_step(chain, integrator, overlap)
     dt = min(dt_acc, 0.5 * lim.h_max_s)
     why = "accuracy rule" if dt == dt_acc else "0.5 x stability limit"
-    at = f"{overlap / chain.delta0_m:.3g} delta0" if chain.delta0_m > 0 else f"{overlap * 1e6:.3g} um"
+    at = (
+        f"{overlap / chain.delta0_m:.3g} delta0"
+        if chain.delta0_m > 0
+        else f"{overlap * 1e6:.3g} um"
+    )
     h_txt = f"{lim.h_max_s * 1e6:.3g} us" if math.isfinite(lim.h_max_s) else "inf"
     return dt, (
         f"{why}: default {dt_acc * 1e6:.3g} us (top block mode {f_top / 1e3:.0f} kHz), "

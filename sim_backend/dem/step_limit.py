@@ -219,9 +219,7 @@ def is_stable(chain: Chain, integrator: str, h: float, overlap_m: float | None =
     key = (chain.spec.model_dump_json(), integrator, h, overlaps)
     hit = _STABLE_CACHE.get(key)
     if hit is None:
-        hit = all(
-            spectral_radius(chain, integrator, h, d) <= 1.0 + STABILITY_TOL for d in overlaps
-        )
+        hit = all(spectral_radius(chain, integrator, h, d) <= 1.0 + STABILITY_TOL for d in overlaps)
         if len(_STABLE_CACHE) > 4096:
             _STABLE_CACHE.clear()
         _STABLE_CACHE[key] = hit

@@ -56,7 +56,8 @@ def test_cli_simulate_dt_refusal_is_one_line(
 ) -> None:
     out = tmp_path / "x.h5"
     argv = ["simulate", "--direction", "ltr", "--amplitude", "1 um", "--duration", "1 ms",
-            "--rate", "50 kS/s", "--integrator", "strang", "--dt", "20 us", "--out", str(out)]  # fmt: skip
+            "--rate", "50 kS/s", "--integrator", "strang", "--dt", "20 us",
+            "--out", str(out)]  # fmt: skip
     assert main(argv) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "--dt" in err and "largest stable step" in err
@@ -84,10 +85,14 @@ GOOD = "n_cylinders: 5\nlength_first: 90 mm\nlength_last: 110 mm\n"
         (GOOD + "density_factors: {9: 2}\n", "density_factors"),
         (GOOD + "density_factors: {2: -1}\n", "density_factors"),
         (GOOD + "contact_gaps: {2: 1 um}\n", "contact_gaps"),  # needs preload 0
-        (GOOD + "preload: 0 N\ncontact_gaps: {5: 1 um}\ndamping: {contact_ratio: 0}\n",
-         "contact_gaps"),  # fmt: skip
-        (GOOD + "preload: 0 N\ncontact_gaps: {2: 1}\ndamping: {contact_ratio: 0}\n",
-         "contact_gaps"),  # fmt: skip
+        (
+            GOOD + "preload: 0 N\ncontact_gaps: {5: 1 um}\ndamping: {contact_ratio: 0}\n",
+            "contact_gaps",
+        ),
+        (
+            GOOD + "preload: 0 N\ncontact_gaps: {2: 1}\ndamping: {contact_ratio: 0}\n",
+            "contact_gaps",
+        ),
         (GOOD + "preload: -1 N\n", "preload"),
         (GOOD + "preload: 0 N\n", "damping.contact_ratio"),
     ],
