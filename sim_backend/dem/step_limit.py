@@ -96,9 +96,9 @@ class StepLimit:
     def describe(self, delta0_m: float) -> str:
         """One line: the limit and how it was found."""
         if delta0_m > 0:
-            at = ", ".join(f"{d / delta0_m:.3g} delta0" for d in self.overlaps_m)
+            at = ", ".join(f"{d / delta0_m:.3g} delta0" for d in sorted(self.overlaps_m))
         else:
-            at = ", ".join(f"{d * 1e6:.3g} um" for d in self.overlaps_m)
+            at = ", ".join(f"{d * 1e6:.3g} um" for d in sorted(self.overlaps_m))
         return (
             f"largest stable step {self.h_max_s * 1e6:.4g} us for {self.integrator} "
             f"(spectral radius of the linearised step map, contacts at overlap {at}; "
@@ -205,7 +205,8 @@ def spectral_radius(chain: Chain, integrator: str, h: float, overlap_m: float) -
 
 def _overlaps(chain: Chain, overlap_m: float | None) -> tuple[float, ...]:
     ref = reference_overlap_m(chain) if overlap_m is None else overlap_m
-    out = sorted({d for d in (chain.delta0_m, ref) if d > 0})
+    # stiffest first: an unstable step usually fails there, so one eigenvalue problem decides
+    out = sorted({d for d in (chain.delta0_m, ref) if d > 0}, reverse=True)
     return tuple(out)
 
 
