@@ -9,11 +9,6 @@ from sim_backend import dem
 from sim_backend.dem.spec import ChainSpec, MaterialSpec
 
 
-@pytest.fixture(scope="module")
-def chain() -> dem.Chain:
-    return dem.build_chain(dem.default_chain_spec())
-
-
 def test_contact_constants(chain: dem.Chain) -> None:
     assert chain.beta_c == pytest.approx(4.08e9, rel=5e-3)
     assert chain.delta0_m == pytest.approx(1.15e-6, rel=5e-3)

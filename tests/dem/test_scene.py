@@ -27,11 +27,6 @@ RATE = 250e3
 
 
 @pytest.fixture(scope="module")
-def chain() -> dem.Chain:
-    return dem.build_chain(dem.default_chain_spec())
-
-
-@pytest.fixture(scope="module")
 def chain6() -> dem.Chain:
     return dem.build_chain(dem.default_chain_spec().model_copy(update={"n_modes": 6}))
 

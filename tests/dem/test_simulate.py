@@ -16,19 +16,6 @@ F_IN = {"ltr": 8.92e3, "rtl": 6.63e3}
 RATE = 250e3
 
 
-@pytest.fixture(scope="module")
-def chain() -> dem.Chain:
-    return dem.build_chain(dem.default_chain_spec())
-
-
-@pytest.fixture(scope="module")
-def undamped() -> dem.Chain:
-    spec = dem.default_chain_spec().model_copy(
-        update={"damping": DampingSpec(resonator_ratio=0.0, contact_ratio=0.0)}
-    )
-    return dem.build_chain(spec)
-
-
 def _burst_drive(
     direction: str, amp: float, kind: str = "displacement", cycles: float = 5.0
 ) -> dem.Drive:

@@ -11,7 +11,6 @@ from daq.cli.biafc import main
 from instruments.burst import Burst
 from sim_backend import dem
 from sim_backend.dem.simulation import StepTooLargeError
-from sim_backend.dem.spec import DampingSpec
 from sim_backend.dem.stability import CASES, run_case
 from sim_backend.dem.step_limit import largest_stable_step, spectral_radius
 
@@ -22,14 +21,6 @@ def test_case_passes(name: str) -> None:
     assert res.passed, (name, res.reason, res.notes)
     assert np.isfinite(res.max_abs_v_m_s)
     assert res.dt_s > 0 and res.step_reason
-
-
-@pytest.fixture(scope="module")
-def undamped() -> dem.Chain:
-    spec = dem.default_chain_spec().model_copy(
-        update={"damping": DampingSpec(resonator_ratio=0.0, contact_ratio=0.0)}
-    )
-    return dem.build_chain(spec)
 
 
 def test_unstable_step_is_refused_with_the_largest_stable_step(undamped: dem.Chain) -> None:
