@@ -22,7 +22,7 @@ from protocols.bench import BenchFile, BenchSpec
 from protocols.runfile import ChainInfo
 from protocols.yamlfile import ConfigError
 
-__all__ = ["AssemblyError", "assemble", "chain_info", "sim_world_config"]
+__all__ = ["AssemblyError", "assemble", "chain_info", "model_chain_info", "sim_world_config"]
 
 
 class AssemblyError(ConfigError):
@@ -46,7 +46,11 @@ def chain_info(bf: BenchFile, n_bands: int = 3) -> ChainInfo:
     from sim_backend import dem
 
     chain = dem.build_chain(_chain_spec(bf))
-    bands = dem.quasi_bands(chain, min(n_bands, chain.n_modes + 1))
+    return model_chain_info(chain, dem.quasi_bands(chain, min(n_bands, chain.n_modes + 1)))
+
+
+def model_chain_info(chain: Any, bands: Any) -> ChainInfo:
+    """The run file's ``/chain`` of a built ``sim_backend.dem.Chain`` and its ``Bands``."""
     return ChainInfo(
         lengths_m=np.asarray(chain.lengths_m, dtype=np.float64),
         diameter_m=float(chain.diameter_m),

@@ -16,7 +16,7 @@ from __future__ import annotations
 import argparse
 import math
 from pathlib import Path
-from typing import Any, Literal
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -82,20 +82,6 @@ def parse_amplitude(text: str) -> tuple[Literal["displacement", "force"], float]
     raise CliError(f"--amplitude: {text!r} needs a length (e.g. '2 um') or a force (e.g. '12 N')")
 
 
-def chain_info(chain: Any, bands: Any) -> Any:
-    """``protocols.runfile.ChainInfo`` of a ``sim_backend.dem.Chain`` and its ``Bands``."""
-    from protocols.runfile import ChainInfo
-
-    return ChainInfo(
-        lengths_m=np.asarray(chain.lengths_m, dtype=np.float64),
-        diameter_m=float(chain.diameter_m),
-        f0_N=float(chain.f0_N),
-        beta_c=float(chain.beta_c),
-        onset_Hz=np.asarray(bands.onset_Hz, dtype=np.float64),
-        cutoff_Hz=np.asarray(bands.cutoff_Hz, dtype=np.float64),
-    )
-
-
 def peak_frequency_Hz(
     v: NDArray[np.float64], rate_Hz: float, f_min_Hz: float = 1e3, f_max_Hz: float = math.inf
 ) -> float:
@@ -109,6 +95,7 @@ def peak_frequency_Hz(
 
 
 def run(args: argparse.Namespace) -> int:
+    from daq.bench_assembly import model_chain_info
     from instruments.burst import Burst
     from protocols.runfile import RunFileWriter, ScanSpec
     from sim_backend import dem
@@ -180,7 +167,7 @@ def run(args: argparse.Namespace) -> int:
     }
     try:
         writer = RunFileWriter.create(
-            args.out, backend="dem", chain=chain_info(chain, bands), scans=[scan],
+            args.out, backend="dem", chain=model_chain_info(chain, bands), scans=[scan],
             simulation=simulation,
         )  # fmt: skip
     except OSError as exc:
