@@ -108,7 +108,7 @@ def build_chain(spec: ChainSpec) -> Chain:
         m0[i] = modes.residual_mass_kg
         mres[i] = modes.modal_mass_kg
         omega[i] = modes.omega_rad_s
-    beta = hertz_beta(spec.diameter, material)
+    beta = hertz_beta(spec.diameter, material, spec.crossing_angle)
     if spec.contact_stiffness_factor != 1.0:
         beta *= spec.contact_stiffness_factor
     delta0 = static_overlap(spec.preload, beta)

@@ -12,6 +12,7 @@ Example (the default chain, ``sim_backend/dem/chains/default.yaml``)::
     material: {youngs_modulus: 72 GPa, density: 2200 kg/m^3, poisson_ratio: 0.17}
     far_end: wall            # wall (rigid Hertz wall) | free (constant preload force)
     damping: {resonator_ratio: 0.002, contact_ratio: 0.005}
+    crossing_angle: 90 deg   # orientation of neighbours (90 deg: woodpile); elliptical Hertz else
 
 Optional, for stiff and extreme variants (``biafc stability``); absent = the plain chain:
 
@@ -37,7 +38,8 @@ import yaml
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from instruments.units import Density, Force, Length, Pressure
+from instruments.units import Angle, Density, Force, Length, Pressure
+from sim_backend.dem.contact import MIN_CROSSING_ANGLE_RAD
 from sim_backend.dem.material import Material
 
 __all__ = [
@@ -109,6 +111,7 @@ class ChainSpec(BaseModel):
     material: MaterialSpec = MaterialSpec()
     far_end: Literal["wall", "free"] = "wall"
     damping: DampingSpec = DampingSpec()
+    crossing_angle: Angle = 0.5 * math.pi
     contact_stiffness_factor: float = Field(default=1.0, gt=0.0, le=1.0e6)
     density_factors: dict[int, float] | None = None
     contact_gaps: dict[int, Length] | None = None
@@ -125,6 +128,15 @@ class ChainSpec(BaseModel):
     def _non_negative(cls, v: float) -> float:
         if not (math.isfinite(v) and v >= 0):
             raise ValueError("must be >= 0")
+        return v
+
+    @field_validator("crossing_angle")
+    @classmethod
+    def _crossing(cls, v: float) -> float:
+        low = MIN_CROSSING_ANGLE_RAD
+        if not low <= v <= math.pi - low:
+            lo = math.degrees(low)
+            raise ValueError(f"must be in [{lo:.3g}, {180 - lo:.3g}] deg (90 deg: the woodpile)")
         return v
 
     @field_validator("contact_stiffness_factor")
@@ -220,6 +232,8 @@ class ChainSpec(BaseModel):
             "far_end": self.far_end,
             "damping": self.damping.model_dump(),
         }
+        if self.crossing_angle != 0.5 * math.pi:
+            data["crossing_angle"] = f"{math.degrees(self.crossing_angle):.9g} deg"
         if self.contact_stiffness_factor != 1.0:
             data["contact_stiffness_factor"] = self.contact_stiffness_factor
         if self.density_factors:

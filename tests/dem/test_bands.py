@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -96,3 +98,31 @@ def test_scaling_with_material() -> None:
 def test_too_many_bands_refused(chain: dem.Chain) -> None:
     with pytest.raises(ValueError, match="n_bands"):
         dem.quasi_bands(chain, 5)
+
+
+@pytest.mark.parametrize("degrees", [20.0, 30.0, 45.0, 60.0])
+def test_oblique_crossing_matches_the_elliptical_hertz_approximation(degrees: float) -> None:
+    """beta_c of cylinders crossed at an angle against Hamrock & Brewe's closed-form fit of the
+    elliptical Hertz contact (about 2 % for Ry/Rx >= 3, i.e. up to 60 deg; it degrades towards
+    1); 90 deg is exactly the sphere on a flat."""
+    from sim_backend.dem.contact import hertz_beta
+    from sim_backend.dem.material import FUSED_QUARTZ
+
+    d = 13.6e-3
+    R = d / 2
+    E_star = FUSED_QUARTZ.contact_modulus_Pa
+    assert hertz_beta(d, FUSED_QUARTZ) == pytest.approx(4 / 3 * E_star * math.sqrt(R), rel=1e-12)
+    c = abs(math.cos(math.radians(degrees)))
+    Rx, Ry = R / (1 + c), R / (1 - c)
+    ratio = Ry / Rx
+    k = 1.0339 * ratio**0.636
+    eps = 1.0003 + 0.5968 / ratio
+    fk = 1.5277 + 0.6023 * math.log(ratio)
+    r_eff = 1 / (1 / Rx + 1 / Ry)
+    delta_1N = fk * (9 / (2 * eps * r_eff) * (1 / (math.pi * k * 2 * E_star)) ** 2) ** (1 / 3)
+    beta = hertz_beta(d, FUSED_QUARTZ, math.radians(degrees))
+    assert beta == pytest.approx(delta_1N**-1.5, rel=0.02)
+    # obliquer crossing: a flatter, stiffer contact; the chain built with it carries it
+    assert beta > hertz_beta(d, FUSED_QUARTZ)
+    spec = dem.default_chain_spec().model_copy(update={"crossing_angle": math.radians(degrees)})
+    assert dem.build_chain(spec).beta_c == pytest.approx(beta)

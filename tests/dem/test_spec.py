@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -54,6 +55,8 @@ def test_good_file_and_round_trip(tmp_path: Path) -> None:
         (GOOD + "lengths: [90 mm, 91 mm]\n", "lengths"),
         (GOOD + "damping: {resonator_ratio: -0.1}\n", "damping.resonator_ratio"),
         ("[1, 2]\n", "mapping"),
+        (GOOD + "crossing_angle: 5 deg\n", "crossing_angle"),
+        (GOOD + "crossing_angle: 90\n", "crossing_angle"),
     ],
 )
 def test_bad_files_give_one_line_naming_the_field(tmp_path: Path, text: str, field: str) -> None:
@@ -93,3 +96,11 @@ def test_impossible_alpha(alpha: float) -> None:
         dem.chain_spec_for_alpha(alpha)
     assert str(info.value).startswith("alpha:")
     assert "\n" not in str(info.value)
+
+
+def test_crossing_angle_round_trips(tmp_path: Path) -> None:
+    spec = dem.load_chain_spec(_write(tmp_path, GOOD + "crossing_angle: 60 deg\n"))
+    assert spec.crossing_angle == pytest.approx(math.radians(60.0))
+    again = dem.load_chain_spec(_write(tmp_path, spec.to_yaml()))
+    assert again.crossing_angle == pytest.approx(spec.crossing_angle)
+    assert "crossing_angle" not in dem.default_chain_spec().to_yaml()
