@@ -2,10 +2,11 @@
 30 ms each, every cylinder recorded at 250 kS/s, in one batch.
 
 Reports the wall time of the batch (``wall_s``: the best of ``REPEATS`` runs, median in
-``wall_median_s``; first call's numba compilation excluded: a warm-up run compiles/loads the
-cache first; velocity and drive recorded, displacement, which nobody reads here, is not) and
-the relative L2 error of every cylinder's velocity against a converged reference (same code, 6th-order composition at a 62.5 ns step)
-on every 8th amplitude of each direction including the largest (``max_rel_error``).
+``wall_median_s``; first call's numba compilation excluded: a warm-up run compiles/loads the cache
+first; velocity and drive recorded, displacement, which nobody reads here, is not) and the relative
+L2 error of every cylinder's velocity against a converged reference (same code, 6th-order
+composition at a 62.5 ns step) on every 8th amplitude of each direction including the largest
+(``max_rel_error``).
 """
 
 from __future__ import annotations
