@@ -194,9 +194,14 @@ def _verdict(res: CaseResult, extra_fail: str = "") -> CaseResult:
 # ---- the cases ---------------------------------------------------------------------------
 
 
-def _six_modes(fast: bool) -> CaseResult:
-    res = CaseResult("six-modes", "stiff", "J = 6 resonators per cylinder (stiff block modes)")
-    upd: dict[str, Any] = {"n_modes": 6, "damping": UNDAMPED}
+def _six_modes(fast: bool, theory: str = "timoshenko") -> CaseResult:
+    if theory == "timoshenko":
+        res = CaseResult("six-modes", "stiff", "J = 6 resonators per cylinder (stiff block modes)")
+    else:
+        res = CaseResult(
+            "six-modes-eb", "stiff", "J = 6, Euler-Bernoulli: resonators beyond 300 kHz"
+        )
+    upd: dict[str, Any] = {"n_modes": 6, "damping": UNDAMPED, "beam_theory": theory}
     if fast:
         upd.update(n_cylinders=8)
     chain = build_chain(_spec(**upd))
@@ -361,6 +366,7 @@ def _step_limit(fast: bool) -> CaseResult:
 #: name -> (kind, what it stresses, runner(fast) -> CaseResult)
 CASES: dict[str, Callable[[bool], CaseResult]] = {
     "six-modes": _six_modes,
+    "six-modes-eb": lambda fast: _six_modes(fast, "euler-bernoulli"),
     "stiff-contact": _stiff_contact,
     "mixed-scale": _mixed_scale,
     "step-limit": _step_limit,
