@@ -2,7 +2,9 @@
 
 ``--explain`` prints the scene's plan (:mod:`sim_backend.dem.scene`: which resonators, contact
 model, window and outputs the run needs, with error bounds and savings) and exits without
-running; ``--out`` is then not needed. A run itself always uses the full model.
+running; ``--out`` is then not needed. A run uses the full model unless ``--lean`` is given:
+then it runs that plan (condensed resonators, linear solution, early stop where the plan allows
+them), prints it, and stores it in the run file's ``/simulation`` attributes (``scene_plan_json``).
 
 The amplitude's unit picks the drive: a length (``2 um``) is the peak displacement of the
 actuator, a moving Hertz wall; a force (``12 N``) is the peak force on the end cylinder. The run
@@ -16,7 +18,7 @@ from __future__ import annotations
 import argparse
 import math
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -50,6 +52,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="print what the scene needs (modes, nonlinearity, time, output: kept or dropped, "
         "why, error bound, saving) and exit without running",
+    )
+    parser.add_argument(
+        "--lean",
+        action="store_true",
+        help="run the reduced model the scene's plan allows (see --explain) and store the plan",
     )
     parser.add_argument(
         "--no-error-estimate",
@@ -131,16 +138,13 @@ def run(args: argparse.Namespace) -> int:
         scene = Scene(chain, (drive,), duration, rate, record=("velocity", "drive"))
         print(plan_scene(scene).explain())
         return 0
-    try:
-        res = dem.simulate(
-            chain, [drive], duration_s=duration, sample_rate_Hz=rate,
-            integrator=args.integrator, dt_s=dt, error_estimate=not args.no_error_estimate,
-        )  # fmt: skip
-    except StepTooLargeError as exc:
-        raise CliError(f"--dt: {exc}") from None
-    meta = res.meta
-    if not meta["finite"]:
-        raise CliError("simulation diverged (non-finite velocity); try a smaller --dt")
+    if args.lean:
+        if dt is not None or args.integrator != "default":
+            raise CliError("--lean picks the model itself; drop --dt and --integrator")
+        res, simulation = _run_lean(chain, drive, duration, rate)
+    else:
+        res, simulation = _run_full(args, chain, drive, duration, rate, dt)
+    simulation.update(drive_kind=kind, far_end=chain.far_end, chain_yaml=spec.to_yaml())
     scan = ScanSpec(
         direction=args.direction,
         amplitudes=np.array([amplitude]),
@@ -151,20 +155,6 @@ def run(args: argparse.Namespace) -> int:
         cycles=burst.cycles,
         drive_units=drive.units,
     )
-    simulation = {
-        "integrator": meta["integrator"],
-        "order": int(meta["order"]),
-        "dt_s": float(meta["dt_s"]),
-        "drive_kind": kind,
-        "far_end": chain.far_end,
-        "energy_residual_rel": float(meta["energy_residual_rel"][0]),
-        "error_estimate_rel": float(meta.get("error_estimate_rel", [float("nan")])[0]),
-        "error_estimate_method": str(meta.get("error_estimate_method", "none (not requested)")),
-        "input_work_J": float(meta["input_work_J"][0]),
-        "damped": bool(meta["damped"]),
-        "wall_s": float(meta["wall_s"]),
-        "chain_yaml": spec.to_yaml(),
-    }
     try:
         writer = RunFileWriter.create(
             args.out, backend="dem", chain=model_chain_info(chain, bands), scans=[scan],
@@ -175,7 +165,9 @@ def run(args: argparse.Namespace) -> int:
     try:
         for c in range(res.cylinders.size):
             writer.write_point(args.direction, 0, c, res.velocity[0, c], res.drive[0])
-        writer.log("info", f"DEM run: {kind} {amplitude:g} {drive.units}, {meta['integrator']}")
+        writer.log(
+            "info", f"DEM run: {kind} {amplitude:g} {drive.units}, {simulation['integrator']}"
+        )
         writer.close("complete")
     except BaseException:
         writer.close("failed")
@@ -190,15 +182,17 @@ def run(args: argparse.Namespace) -> int:
         lo, hi = float(bands.onset_Hz[:, 1].min()), float(bands.cutoff_Hz[:, 1].max())
         f_band = peak_frequency_Hz(v[far], rate, lo, hi)
     far_no = int(res.cylinders[far])
+    step = "" if simulation["order"] == 0 else f" dt = {simulation['dt_s'] * 1e6:.3g} us"
+    residual = "energy residual" if not chain_damped(chain) else "energy lost (damped chain)"
     print(
         f"{args.out}: {args.direction} {kind} {amplitude:g} {drive.units} at "
         f"{burst.f_center_Hz / 1e3:g} kHz, {chain.n} cylinders, {res.time_s.size} samples, "
-        f"{meta['integrator']} dt = {meta['dt_s'] * 1e6:.3g} us, {meta['wall_s']:.2f} s"
+        f"{simulation['integrator']}{step}, {simulation['wall_s']:.2f} s"
     )
     print(
         f"error estimate (worst cylinder, relative L2): {simulation['error_estimate_rel']:.2g} "
-        f"[{simulation['error_estimate_method']}]; energy residual "
-        f"{simulation['energy_residual_rel']:.2g} of the input work"
+        f"[{simulation['error_estimate_method']}]; {residual} "
+        f"{abs(simulation['energy_residual_rel']):.2g} of the input work"
     )
     print(f"transmitted energy ratio (cylinder {far_no} / entry): {ratio:.4g}")
     print(f"far-end (cylinder {far_no}) spectral peak: {f_peak / 1e3:.3f} kHz")
@@ -208,3 +202,83 @@ def run(args: argparse.Namespace) -> int:
             f"[{lo / 1e3:.2f}, {hi / 1e3:.2f}] kHz: {f_band / 1e3:.3f} kHz"
         )
     return 0
+
+
+def _run_full(
+    args: argparse.Namespace, chain: Any, drive: Any, duration: float, rate: float,
+    dt: float | None,
+) -> tuple[Any, dict[str, Any]]:  # fmt: skip
+    """The full model: (``SimResult``, the run file's ``/simulation`` attributes)."""
+    from sim_backend import dem
+
+    try:
+        res = dem.simulate(
+            chain, [drive], duration_s=duration, sample_rate_Hz=rate,
+            integrator=args.integrator, dt_s=dt, error_estimate=not args.no_error_estimate,
+        )  # fmt: skip
+    except StepTooLargeError as exc:
+        raise CliError(f"--dt: {exc}") from None
+    meta = res.meta
+    if not meta["finite"]:
+        raise CliError("simulation diverged (non-finite velocity); try a smaller --dt")
+    return res, {
+        "integrator": meta["integrator"],
+        "order": int(meta["order"]),
+        "dt_s": float(meta["dt_s"]),
+        "energy_residual_rel": float(meta["energy_residual_rel"][0]),
+        "error_estimate_rel": float(meta.get("error_estimate_rel", [float("nan")])[0]),
+        "error_estimate_method": str(meta.get("error_estimate_method", "none (not requested)")),
+        "input_work_J": float(meta["input_work_J"][0]),
+        "damped": bool(meta["damped"]),
+        "wall_s": float(meta["wall_s"]),
+    }
+
+
+def _run_lean(chain: Any, drive: Any, duration: float, rate: float) -> tuple[Any, dict[str, Any]]:
+    """The plan's reduced model (:func:`sim_backend.dem.scene.run_scene`), printed first:
+    (``SceneResult``, the run file's ``/simulation`` attributes, the plan as JSON included).
+    The error estimate is the plan's own bound: the linearisation error for the linear solution,
+    else the largest bound of the decisions taken (condensation, early stop)."""
+    import json
+
+    from sim_backend.dem.scene import Scene, plan_scene, run_scene
+
+    plan = plan_scene(Scene(chain, (drive,), duration, rate, record=("velocity", "drive")))
+    print(plan.explain())
+    res = run_scene(plan)
+    meta = res.meta
+    if res.velocity is None or not np.all(np.isfinite(res.velocity)):
+        raise CliError("simulation diverged (non-finite velocity)")
+    bounds = [d.error_bound for d in plan.decisions if d.reduced and d.error_bound is not None]
+    if meta["solver"] == "linear-modal":
+        estimate = float(meta["linear_error_est"])
+        method = "linearisation error bound of the scene plan"
+        integrator, order, dt_s, residual = "linear-modal", 0, 1.0 / rate, float("nan")
+    else:
+        estimate = max(bounds, default=float("nan"))
+        method = "largest error bound of the scene plan's reductions"
+        integrator, order = str(meta["integrator"]), int(_order(meta["integrator"]))
+        dt_s, residual = float(meta["dt_s"]), float(np.asarray(meta["energy_residual_rel"])[0])
+    return res, {
+        "integrator": integrator,
+        "order": order,
+        "dt_s": dt_s,  # the linear solution: the record's sample period
+        "energy_residual_rel": residual,
+        "error_estimate_rel": estimate,
+        "error_estimate_method": method,
+        "damped": chain_damped(chain),
+        "wall_s": float(meta["wall_s"]),
+        "scene_plan_json": json.dumps(plan.as_dict(), default=float),
+    }
+
+
+def _order(integrator: str) -> int:
+    """Order of a named integrator of :data:`sim_backend.dem.INTEGRATORS`."""
+    from sim_backend.dem import INTEGRATORS
+
+    return INTEGRATORS[integrator][0]
+
+
+def chain_damped(chain: Any) -> bool:
+    """True when any damping ratio of ``chain`` is above 0."""
+    return bool(chain.resonator_damping_ratio > 0 or chain.contact_damping_ratio > 0)

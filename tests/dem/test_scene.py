@@ -4,6 +4,7 @@ model, and the planner refusing what would be wrong."""
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -203,3 +204,31 @@ def test_cli_explain_names_every_decision(
     assert "kept" in out and "DROPPED" in out and "error bound" in out
     assert main(["simulate", "--direction", "ltr", "--amplitude", "2 um"]) == 2
     assert "--out" in capsys.readouterr().err
+
+
+def test_cli_lean_runs_the_plan_and_stores_it(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``biafc simulate --lean``: at 0.01 um the plan takes the linear solution; the run file
+    says so, carries the plan, and agrees with the full nonlinear run within the plan's bound."""
+    import json
+
+    from protocols.runfile import read_run
+
+    common = ["simulate", "--direction", "ltr", "--amplitude", "0.01 um", "--duration", "8 ms"]
+    lean, full = tmp_path / "lean.h5", tmp_path / "full.h5"
+    assert main([*common, "--lean", "--out", str(lean)]) == 0
+    assert "nonlinearity: DROPPED" in capsys.readouterr().out
+    assert main([*common, "--out", str(full), "--no-error-estimate"]) == 0
+    a, b = read_run(lean), read_run(full)
+    assert a.simulation["integrator"] == "linear-modal"
+    plan = json.loads(a.simulation["scene_plan_json"])
+    assert plan["solver"] == "linear-modal" and len(plan["decisions"]) == 4
+    bound = float(a.simulation["error_estimate_rel"])
+    assert 0 < bound <= 1e-2
+    va, vb = a.scans["ltr"].velocity[0], b.scans["ltr"].velocity[0]
+    assert va.shape == vb.shape
+    err = float(np.sqrt(np.mean((va - vb) ** 2)) / np.sqrt(np.mean(vb**2)))
+    assert err <= bound, (err, bound)
+    assert main([*common, "--lean", "--dt", "1 us", "--out", str(tmp_path / "x.h5")]) == 2
+    assert "--lean picks the model itself" in capsys.readouterr().err
