@@ -28,7 +28,7 @@ from sim_backend.dem.accuracy_scenes import BUILTIN_SCENES, AccuracyScene
 from sim_backend.dem.converged import ConvergedReference, converged_reference
 from sim_backend.dem.errors import rel_l2
 from sim_backend.dem.reference import make_rhs
-from sim_backend.dem.simulation import DEFAULT_INTEGRATOR, INTEGRATORS, simulate
+from sim_backend.dem.simulation import DEFAULT_INTEGRATOR, INTEGRATORS
 
 __all__ = [
     "FULL_LADDERS",
@@ -133,19 +133,7 @@ def measure_fixed(
     scene: AccuracyScene, ref: ConvergedReference, integrator: str, dt_s: float
 ) -> Measurement:
     """Run the compiled ``integrator`` at step ``dt_s`` (s) on the scene and measure it."""
-    chain, drive = scene.chain(), scene.drive()
-
-    def go() -> Any:
-        return simulate(
-            chain,
-            [drive],
-            duration_s=scene.duration_s,
-            sample_rate_Hz=scene.sample_rate_Hz,
-            integrator=integrator,
-            dt_s=dt_s,
-        )
-
-    res, wall = _timed_best(go)
+    res, wall = _timed_best(lambda: scene.simulate(integrator, dt_s))
     steps = int(res.meta["substeps_per_sample"]) * (scene.n_samples - 1)
     kicks = len(INTEGRATORS[integrator][2]) * steps
     e = _errors(scene, res.velocity[0], ref)

@@ -16,6 +16,7 @@ from typing import Literal
 from instruments.burst import Burst
 from sim_backend.dem.chain import Chain, build_chain
 from sim_backend.dem.drive import Drive
+from sim_backend.dem.simulation import SimResult, simulate
 from sim_backend.dem.spec import ChainSpec, default_chain_spec
 
 __all__ = ["BUILTIN_SCENES", "DEFAULT_F_HZ", "AccuracyScene", "builtin_scene"]
@@ -69,6 +70,17 @@ class AccuracyScene:
         burst = Burst(self.f_center_Hz, cycles=self.cycles)
         return Drive(
             direction=self.direction, kind=self.kind, amplitude=self.amplitude, burst=burst
+        )
+
+    def simulate(self, integrator: str, dt_s: float) -> SimResult:
+        """The scene run by the compiled ``integrator`` at step ``dt_s`` (s)."""
+        return simulate(
+            self.chain(),
+            [self.drive()],
+            duration_s=self.duration_s,
+            sample_rate_Hz=self.sample_rate_Hz,
+            integrator=integrator,
+            dt_s=dt_s,
         )
 
     @property

@@ -23,7 +23,6 @@ from numpy.typing import NDArray
 
 from sim_backend.dem.accuracy_scenes import AccuracyScene
 from sim_backend.dem.errors import rel_l2
-from sim_backend.dem.simulation import simulate
 
 __all__ = ["ConvergedReference", "cache_dir", "converged_reference"]
 
@@ -111,17 +110,9 @@ def converged_reference(
         except (OSError, ValueError, KeyError):
             pass  # unreadable entry: recompute and overwrite
     t0 = time.perf_counter()
-    chain, drive = scene.chain(), scene.drive()
 
     def run(dt: float) -> tuple[NDArray[np.float64], float]:
-        res = simulate(
-            chain,
-            [drive],
-            duration_s=scene.duration_s,
-            sample_rate_Hz=scene.sample_rate_Hz,
-            integrator=integrator,
-            dt_s=dt,
-        )
+        res = scene.simulate(integrator, dt)
         return res.velocity, float(res.meta["dt_s"])
 
     prev, dt = run(dt0_s)
