@@ -47,6 +47,15 @@ def _default_assembler(bf: Any, seed: int | None) -> Any:
     return assemble(bf, seed=seed)
 
 
+def shown_path(path: str | Path) -> str:
+    """``path`` as the window shows it: relative to the working folder when inside it."""
+    p = Path(path)
+    try:
+        return str(p.resolve().relative_to(Path.cwd().resolve()))
+    except (ValueError, OSError):
+        return str(p)
+
+
 class MainWindow(QMainWindow):
     """The bench window.
 
@@ -199,7 +208,7 @@ class MainWindow(QMainWindow):
         self._disconnect()
         self.bench_file = bf
         shown = Path(path) if path is not None else default_bench_path()
-        self.bench_panel.path_edit.setText(str(shown))
+        self.bench_panel.path_edit.setText(shown_path(shown))
         kind = "simulated" if bf.bench.simulated else "hardware"
         self.bench_panel.status_label.setText(
             f"{bf.bench.name} ({kind}, {bf.bench.n_cylinders} cylinders): not connected"
@@ -344,7 +353,7 @@ class MainWindow(QMainWindow):
             self.log(f"{p}: {exc}", "error")
             return False
         self.protocol_path = p
-        self.protocol_panel.path_edit.setText(str(p))
+        self.protocol_panel.path_edit.setText(shown_path(p))
         self.protocol_panel.set_text(text)
         self.protocol_panel.validate_now()
         self.log(f"protocol {p.name} opened")
@@ -403,8 +412,9 @@ class MainWindow(QMainWindow):
             self.log(f"saving {path}: {exc}", "error")
             return
         self.protocol_path = path
-        self.protocol_panel.path_edit.setText(str(path))
-        self.log(f"protocol saved to {path}" + ("" if self.protocol_panel.valid else " (INVALID)"))
+        self.protocol_panel.path_edit.setText(shown_path(path))
+        invalid = "" if self.protocol_panel.valid else " (INVALID)"
+        self.log(f"protocol saved to {shown_path(path)}{invalid}")
 
     def dry_run(self) -> None:
         """Validate and report point count, ETA and output path; nothing moves."""
@@ -416,7 +426,7 @@ class MainWindow(QMainWindow):
         self.log(
             f"dry run: {self.plan.n_points} points, estimated "
             f"{format_duration(self.plan.estimated_s)} ({self.plan.estimated_s:.1f} s); "
-            f"output {out}"
+            f"output {shown_path(out)}"
         )
 
     # -- run -------------------------------------------------------------------------------
@@ -481,7 +491,7 @@ class MainWindow(QMainWindow):
         self.run_panel.progress.setMaximum(engine.plan.n_points)
         self.run_panel.progress.setValue(0)
         self.run_panel.set_state("running")
-        self.log(f"{'resuming' if resume else 'starting'} run -> {out}")
+        self.log(f"{'resuming' if resume else 'starting'} run -> {shown_path(out)}")
         engine.start()
         return True
 
@@ -523,7 +533,8 @@ class MainWindow(QMainWindow):
                 self.log(f"run {d['state']}")
             elif k == EventKind.RUN_STARTED:
                 self.log(
-                    f"run {d['path']}: {d['n_todo']} of {d['n_points']} points to measure "
+                    f"run {shown_path(d['path'])}: {d['n_todo']} of {d['n_points']} points to "
+                    "measure "
                     f"(estimated {format_duration(d['estimated_s'])})"
                 )
             elif k == EventKind.POINT_FAILED:
@@ -543,7 +554,8 @@ class MainWindow(QMainWindow):
         failed = f", {d['n_failed']} failed" if d.get("n_failed") else ""
         reason = f": {d['reason']}" if d.get("reason") else ""
         level = "info" if status == "complete" else "error"
-        self.log(f"run {status}{reason} ({d['n_done']} points{failed}) -> {d['path']}", level)
+        where = shown_path(d["path"])
+        self.log(f"run {status}{reason} ({d['n_done']} points{failed}) -> {where}", level)
         self.run_panel.where_label.setText(f"run {status}{reason}")
         self._redraw()
         self.refresh_snapshot()
@@ -628,7 +640,7 @@ class MainWindow(QMainWindow):
             if err is not None:
                 self.log(f"export figures: {err}", "error")
             else:
-                self.log(f"figures of {p.name} written to {out}")
+                self.log(f"figures of {p.name} written to {shown_path(out)}")
             if on_done:
                 on_done(err is None)
 

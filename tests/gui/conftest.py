@@ -12,7 +12,7 @@ import pytest
 from PySide6.QtCore import QElapsedTimer, QTimer
 
 from daq.bench_assembly import assemble
-from daq.gui.main_window import MainWindow
+from daq.gui.main_window import MainWindow, shown_path
 
 ROOT = Path(__file__).resolve().parents[2]
 SMOKE = ROOT / "protocols" / "smoke.yaml"
@@ -61,7 +61,7 @@ def window(qtbot: Any, tmp_path: Path) -> Iterator[MainWindow]:
     win = MainWindow(None, SMOKE, assembler=make_assembler(read_sleep_s=0.03))
     win.confirm_close = lambda: True  # type: ignore[method-assign]
     qtbot.addWidget(win)
-    win.run_panel.out_edit.setText(str(tmp_path / "run.h5"))
+    win.run_panel.out_edit.setText(shown_path(tmp_path / "run.h5"))
     win.show()
     yield win
     if win.running:

@@ -62,3 +62,14 @@ def test_biafc_gui_missing_file_is_one_line(
     err = capsys.readouterr().err.strip()
     assert code == 2
     assert "nope.yaml" in err and len(err.splitlines()) == 1
+
+
+def test_paths_shown_relative_to_the_working_folder(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from daq.gui.main_window import shown_path
+
+    monkeypatch.chdir(tmp_path)
+    assert shown_path(tmp_path / "runs" / "a.h5") == str(Path("runs") / "a.h5")
+    outside = tmp_path.parent / "elsewhere.h5"
+    assert shown_path(outside) == str(outside)
