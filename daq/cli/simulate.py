@@ -183,7 +183,7 @@ def run(args: argparse.Namespace) -> int:
         f_band = peak_frequency_Hz(v[far], rate, lo, hi)
     far_no = int(res.cylinders[far])
     step = "" if simulation["order"] == 0 else f" dt = {simulation['dt_s'] * 1e6:.3g} us"
-    residual = "energy residual" if not chain_damped(chain) else "energy lost (damped chain)"
+    residual = "energy residual" if not chain.damped else "energy lost (damped chain)"
     print(
         f"{args.out}: {args.direction} {kind} {amplitude:g} {drive.units} at "
         f"{burst.f_center_Hz / 1e3:g} kHz, {chain.n} cylinders, {res.time_s.size} samples, "
@@ -241,6 +241,7 @@ def _run_lean(chain: Any, drive: Any, duration: float, rate: float) -> tuple[Any
     else the largest bound of the decisions taken (condensation, early stop)."""
     import json
 
+    from sim_backend import dem
     from sim_backend.dem.scene import Scene, plan_scene, run_scene
 
     plan = plan_scene(Scene(chain, (drive,), duration, rate, record=("velocity", "drive")))
@@ -257,7 +258,7 @@ def _run_lean(chain: Any, drive: Any, duration: float, rate: float) -> tuple[Any
     else:
         estimate = max(bounds, default=float("nan"))
         method = "largest error bound of the scene plan's reductions"
-        integrator, order = str(meta["integrator"]), int(_order(meta["integrator"]))
+        integrator, order = str(meta["integrator"]), int(dem.INTEGRATORS[meta["integrator"]][0])
         dt_s, residual = float(meta["dt_s"]), float(np.asarray(meta["energy_residual_rel"])[0])
     return res, {
         "integrator": integrator,
@@ -266,19 +267,7 @@ def _run_lean(chain: Any, drive: Any, duration: float, rate: float) -> tuple[Any
         "energy_residual_rel": residual,
         "error_estimate_rel": estimate,
         "error_estimate_method": method,
-        "damped": chain_damped(chain),
+        "damped": chain.damped,
         "wall_s": float(meta["wall_s"]),
         "scene_plan_json": json.dumps(plan.as_dict(), default=float),
     }
-
-
-def _order(integrator: str) -> int:
-    """Order of a named integrator of :data:`sim_backend.dem.INTEGRATORS`."""
-    from sim_backend.dem import INTEGRATORS
-
-    return INTEGRATORS[integrator][0]
-
-
-def chain_damped(chain: Any) -> bool:
-    """True when any damping ratio of ``chain`` is above 0."""
-    return bool(chain.resonator_damping_ratio > 0 or chain.contact_damping_ratio > 0)

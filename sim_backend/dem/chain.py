@@ -73,6 +73,11 @@ class Chain:
             return dash / self.f0_N
         return np.zeros_like(dash)
 
+    @property
+    def damped(self) -> bool:
+        """True when any damping ratio (resonators or contacts) is above 0."""
+        return self.resonator_damping_ratio > 0.0 or self.contact_damping_ratio > 0.0
+
     def contact_dashpot_Ns_per_m(self) -> NDArray[np.float64]:
         """[N+1] dashpot coefficient (N s/m) of each contact: wall-#1, #1-#2, ..., #N-wall."""
         m = np.concatenate([self.m0_kg[:1], self.m0_kg, self.m0_kg[-1:]])

@@ -296,7 +296,7 @@ def plan_scene(
             f"{tol.linear_error:.2g}"
         )
         nonlin = Decision("nonlinearity", False, "Hertz contacts (nonlinear kernel)", why)
-    damped = chain.resonator_damping_ratio > 0.0 or chain.contact_damping_ratio > 0.0
+    damped = chain.damped
     stop: float | None = None
     if linear:
         time_d = Decision(

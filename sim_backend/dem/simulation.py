@@ -332,14 +332,13 @@ def simulate(
     work = energy[:, 2]
     gain = energy[:, 1] - energy[:, 0]
     scale = np.maximum(np.abs(work), 1e-300)
-    undamped = chain.resonator_damping_ratio == 0.0 and chain.contact_damping_ratio == 0.0
     meta: dict[str, Any] = {
         "integrator": name,
         "order": order,
         "dt_s": h,
         "substeps_per_sample": n_sub,
         "sample_rate_Hz": sample_rate_Hz,
-        "damped": not undamped,
+        "damped": chain.damped,
         "input_work_J": work,
         "energy_gain_J": gain,
         "energy_residual_rel": (gain - work) / scale,
