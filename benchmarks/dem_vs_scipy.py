@@ -3,8 +3,8 @@
 
 1. The sweep of ``benchmarks/dem_sweep.py`` (default chain, 2 directions x 64 amplitudes from
    0.01 to 4 delta0, 30 ms at 250 kS/s, every cylinder) with the default integrator, one batch:
-   wall time (best of ``REPEATS`` runs, velocity and drive recorded), hence the cost of one
-   trajectory (wall / 128).
+   wall time (best of ``SWEEP_REPEATS`` runs, velocity and drive recorded), hence the cost of
+   one trajectory (wall / 128).
 2. On a subset (the largest amplitude of each direction: contacts open and close), the default
    integrator's error against the converged reference (``sim_backend.dem.converged``; relative
    L2 of the worst cylinder's velocity), then DOP853 on ``reference.make_rhs`` with ``rtol``
@@ -14,7 +14,10 @@
    ``ratio_single``: over the default integrator run alone on that one trajectory).
 3. The floor: floating-point operations per step of the kernel (counted from its loops, below)
    times the steps of the sweep, over the peak rate of this machine measured by a small numba
-   kernel (independent multiply-adds, all threads). ``floor_ratio`` = sweep wall / floor.
+   kernel (independent multiply-adds, all threads). ``floor_ratio`` = sweep wall / floor. The
+   peak is measured right before each run of the sweep (the machine is shared, and its speed
+   drifts by tens of per cent within minutes): ``floor_ratio`` takes the best of each,
+   ``floor_ratio_median`` the medians.
 
 Set ``DEM_VS_SCIPY_SUBSET=4`` to add the middle amplitude of each direction.
 """
@@ -37,6 +40,9 @@ from sim_backend.dem.converged import converged_reference
 from sim_backend.dem.errors import rel_l2
 from sim_backend.dem.simulation import DEFAULT_INTEGRATOR, INTEGRATORS
 
+#: turns of (peak, sweep) measured; the best of each is reported
+SWEEP_REPEATS = 5
+
 
 @numba.njit(parallel=True, fastmath=True, cache=True)
 def _fma_kernel(n_iter: int, n_par: int) -> np.ndarray:  # type: ignore[type-arg]
@@ -55,35 +61,43 @@ def _fma_kernel(n_iter: int, n_par: int) -> np.ndarray:  # type: ignore[type-arg
     return out
 
 
-def peak_flops() -> float:
-    """Measured peak (flop/s) of independent multiply-adds on every numba thread (best of 5)."""
+def peak_flops(repeats: int = 5) -> float:
+    """Measured peak (flop/s) of independent multiply-adds on every numba thread (best of
+    ``repeats``)."""
     n_par = numba.get_num_threads()
     n_iter = 4_000_000
     _fma_kernel(10, n_par)
     best = math.inf
-    for _ in range(5):
+    for _ in range(repeats):
         t0 = time.perf_counter()
         _fma_kernel(n_iter, n_par)
         best = min(best, time.perf_counter() - t0)
     return 2.0 * 64 * n_iter * n_par / best
 
 
-def flops_per_step(n_cyl: int, n_block: int, n_kicks: int, damped: bool) -> int:
-    """Flops of one step of one trajectory in ``kernel.run_batch`` (N cylinders, K = J + 1 block
-    modes, m kicks, m drifts since the last and first drift merge).
+def flops_per_step(
+    n_cyl: int, n_block: int, n_kicks: int, n_sub: int, damped: bool, n_recorded: int
+) -> float:
+    """Floating-point operations of one step of one trajectory in ``kernel.run_batch``, counted
+    from its loops (N cylinders, K = J + 1 block modes, m kicks a step, ``n_sub`` steps a
+    sample, C cylinders recorded; a fused multiply-add counts 2, a sqrt or max 1).
 
-    drift: 2x2 rotation of (q, p) per mode, 6 N K. kick: primary u and u' from the modes 4 N K;
-    gaps and Hertz ``beta d sqrt(d)`` 7 per contact (sqrt counted as one); damped: two sweeps of
-    Hunt-Crossley 5 per contact plus the force difference N, and the midpoint update 2 N;
-    momentum update 2 N K.
+    Pass 1 (after every drift, m per step plus one per sample): per cylinder the kick length x
+    force (N); per mode the pending kick ``p += f F`` (2), the 2x2 drift (6) and, except after
+    the sample's last drift, the mode's share of u and u' (4): 12 N K + N, or 8 N K + N.
+    Pass 2 (every kick): per contact the overlap (2), Hertz ``beta d sqrt(d)`` with its max (4),
+    the dashpot at the start velocities (5); damped, the midpoint velocity (3), the dashpot at
+    the midpoint (5) and the force difference (1), else the force difference (1); the actuator
+    contact adds 11 (wall mask, drive force, the wall's work). Recording (every sample): 2 K
+    per recorded cylinder (the velocity).
     """
     nk = n_cyl * n_block
     contacts = n_cyl + 1
-    kick = 4 * nk + 7 * contacts + 2 * nk + n_cyl
-    if damped:
-        kick += 2 * (5 * contacts + n_cyl) + 2 * n_cyl
-    drift = 6 * nk
-    return n_kicks * (kick + drift)
+    pass1 = 12 * nk + n_cyl
+    pass1_last = 8 * nk + n_cyl
+    pass2 = (6 + 5 + (3 + 5 + 1 if damped else 1)) * contacts + 11
+    record = 2 * n_block * n_recorded
+    return n_kicks * (pass1 + pass2) + (pass1_last + record) / n_sub
 
 
 def _rtol_for(scene: AccuracyScene, ref: Any, target: float) -> tuple[Any, list[dict[str, float]]]:
@@ -139,7 +153,16 @@ def run() -> dict[str, Any]:
             walls.append(time.perf_counter() - t)
         return res, min(walls)
 
-    sweep, sweep_s = best_of(REPEATS, drives)
+    # the sweep and the peak, measured in turns so that both see the machine in the same state
+    # (it is shared: wall times vary by tens of per cent from minute to minute)
+    sweep_walls: list[float] = []
+    peaks: list[float] = []
+    for _ in range(SWEEP_REPEATS):
+        peaks.append(peak_flops(repeats=1))
+        sweep, wall = best_of(1, drives)
+        sweep_walls.append(wall)
+    sweep_s = min(sweep_walls)
+    peak = max(peaks)
     per_traj_s = sweep_s / len(drives)
     n_subset = int(os.environ.get("DEM_VS_SCIPY_SUBSET", "2"))
     picks = [N_AMPLITUDES - 1, N_AMPLITUDES // 2][: max(1, n_subset // 2)]
@@ -176,11 +199,10 @@ def run() -> dict[str, Any]:
                 }
             )
     order, _, b_w = INTEGRATORS[DEFAULT_INTEGRATOR]
-    damped = chain.resonator_damping_ratio > 0 or chain.contact_damping_ratio > 0
-    fps = flops_per_step(chain.n, chain.n_modes + 1, len(b_w), damped)
-    steps = int(sweep.meta["substeps_per_sample"]) * (sweep.time_s.size - 1)
-    total_flops = float(fps) * steps * len(drives)
-    peak = peak_flops()
+    n_sub = int(sweep.meta["substeps_per_sample"])
+    fps = flops_per_step(chain.n, chain.n_modes + 1, len(b_w), n_sub, chain.damped, chain.n)
+    steps = n_sub * (sweep.time_s.size - 1)
+    total_flops = fps * steps * len(drives)
     floor_s = total_flops / peak
     ratio = float(np.exp(np.mean(np.log([row["ratio"] for row in rows]))))
     return {
@@ -191,6 +213,7 @@ def run() -> dict[str, Any]:
         "duration_s": DURATION_S,
         "sample_rate_Hz": RATE_HZ,
         "sweep_wall_s": sweep_s,
+        "sweep_wall_median_s": float(np.median(sweep_walls)),
         "per_trajectory_s": per_traj_s,
         "error": float(max(row["err_default"] for row in rows)),
         "ratio_vs_solve_ivp": ratio,
@@ -201,6 +224,7 @@ def run() -> dict[str, Any]:
         "peak_flops_per_s": peak,
         "floor_s": floor_s,
         "floor_ratio": sweep_s / floor_s,
+        "floor_ratio_median": float(np.median(sweep_walls) * np.median(peaks)) / total_flops,
         "threads": numba.get_num_threads(),
         "table": rows,
     }

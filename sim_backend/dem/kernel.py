@@ -13,8 +13,14 @@ second order). The last drift of a step and the first of the next are merged. Th
 work is summed as ``sum_k b_k h dV/dt`` (extended phase space) so that ``H(end) - H(0) - W``
 measures the integrator's energy error when the damping is off.
 
-Trajectories are processed in lanes of ``W`` (same orientation), the innermost loops running
-over the lanes so that they vectorise.
+Trajectories are processed in chunks of ``W`` lanes (same orientation, ``W`` a multiple of 4),
+four lanes to a SIMD vector (:mod:`sim_backend.dem.simd`): every operation below acts on four
+trajectories at once, and the per-lane arithmetic is the same whatever the chunk, so a drive's
+result does not depend on the batch around it. One kick costs two passes: one over the
+cylinders applies the previous kick to the momenta, drifts every mode and sums the primary
+displacement and velocity (``u``, ``u'``) in registers; one along the contacts, carrying the
+left neighbour's values in registers, gives the Hertz forces and the dashpots at the start
+velocities and, one contact behind, the midpoint velocities and the dashpots at those.
 
 Optional (default off, results bit-for-bit unchanged): ``record_flags`` skips the recording of
 unrequested quantities (bit 0 velocity, 1 displacement, 2 drive; an unrequested output array is
@@ -32,6 +38,8 @@ import math
 import numba
 import numpy as np
 from numpy.typing import NDArray
+
+from sim_backend.dem.simd import Vec4, vfma, vload, vmax, vsplat, vsqrt, vstore
 
 __all__ = ["drift_coefficients", "drive_value", "run_batch"]
 
@@ -140,6 +148,91 @@ def _lane_energy(
     return hh
 
 
+@numba.njit(cache=True)
+def _drive_end(src: int, prm: NDArray[np.float64], n_table: int) -> float:
+    """Trigger time (s) after which a drive of :func:`drive_value` is zero."""
+    if src == 0:
+        return float(prm[6] + prm[2])
+    return float(prm[6] + (n_table - 1) / prm[7])
+
+
+#: samples recorded into a chunk's buffer before they are copied to the output arrays
+REC_BLOCK = 16
+
+
+@numba.njit(inline="always")
+def _primary(x: NDArray[np.float64], phi: NDArray[np.float64], i: int, W: int, g: int) -> Vec4:
+    """Primary-mass displacement (``x = q``) or velocity (``x = p``) of cylinder ``i``, lanes
+    ``g .. g+3``: ``sum_k phi[i, k] x[i, k]``."""
+    K = phi.shape[1]
+    acc = vsplat(0.0)
+    for k in range(K):
+        acc = vfma(vsplat(phi[i, k]), vload(x, (i * K + k) * W + g), acc)
+    return acc
+
+
+@numba.njit(cache=True)
+def _copy_out(
+    buf: NDArray[np.float64],  # [REC_BLOCK, C, W] flat
+    out: NDArray[np.float64],  # [R, C, S]
+    lanes: NDArray[np.int64],  # [W] trajectory of each lane (-1: padding)
+    s0: int,
+    n: int,
+) -> None:
+    """``out[r, c, s0 + j] = buf[j, c, b]`` for the first ``n`` buffered samples of every lane
+    ``b`` (trajectory ``r``); nothing when the quantity is not recorded (empty buffer)."""
+    W = lanes.size
+    C = out.shape[1]
+    if buf.size == 0:
+        return
+    for b in range(W):
+        r = lanes[b]
+        if r < 0:
+            continue
+        for c in range(C):
+            for j in range(n):
+                out[r, c, s0 + j] = buf[(j * C + c) * W + b]
+
+
+@numba.njit(inline="always")
+def _mode_update(
+    q: NDArray[np.float64],  # [N K W] flat
+    p: NDArray[np.float64],
+    j: int,  # index of the mode's first lane in q and p
+    c0: Vec4,
+    c1: Vec4,
+    c2: Vec4,
+    c3: Vec4,
+    f: Vec4,  # phi0 of the mode (1/sqrt(kg))
+    kick: Vec4,  # kick length x force on the primary mass (N s)
+    u_sum: Vec4,
+    ud_sum: Vec4,
+) -> tuple[Vec4, Vec4]:
+    """One mode of four lanes: the pending kick ``p += f kick``, the drift ``(q, p) <- [[c0, c1],
+    [c2, c3]] (q, p)``, and the mode's share of the primary displacement and velocity, added to
+    ``u_sum`` and ``ud_sum`` (returned)."""
+    q0 = vload(q, j)
+    p0 = vfma(f, kick, vload(p, j))
+    q1 = c0 * q0 + c1 * p0
+    p1 = c2 * q0 + c3 * p0
+    vstore(q, j, q1)
+    vstore(p, j, p1)
+    return vfma(f, q1, u_sum), vfma(f, p1, ud_sum)
+
+
+@numba.njit(inline="always")
+def _hertz(d: Vec4, beta: float) -> Vec4:
+    """Tensionless Hertz force ``beta [d]_+^1.5`` (N) of four overlaps ``d`` (m)."""
+    d = vmax(d, vsplat(0.0))
+    return beta * d * vsqrt(d)
+
+
+@numba.njit(inline="always")
+def _dashpot(fh: Vec4, chi: float, rel_vel: Vec4) -> Vec4:
+    """Hunt-Crossley contact force ``[fh (1 + chi d')]_+`` (N); ``rel_vel`` = d' (m/s)."""
+    return vmax(fh * (1.0 + chi * rel_vel), vsplat(0.0))
+
+
 @numba.njit(cache=True, parallel=True)
 def run_batch(
     phi0: NDArray[np.float64],  # [2, N, K] primary component of mass-normalised block modes
@@ -191,54 +284,78 @@ def run_batch(
     rec_disp = (record_flags & 2) != 0
     rec_drv = (record_flags & 4) != 0
     n_contacts = N - 1 + far_wall
+    pairs = W % 8 == 0  # lanes handled eight at a time (two vectors), else four
+    lane_step = 8 if pairs else 4
+    # one sample = n_sub steps = n_sub m kicks, each after a drift (the last drift of a step
+    # merged with the first of the next), then a last drift
+    n_kicks = n_sub * m
+    kick_drift = np.empty(n_kicks + 1, dtype=np.int64)  # drift kind before each kick, and last
+    kick_dt = np.empty(n_kicks + 1)  # length of that drift (s)
+    kick_h = np.zeros(n_kicks + 1)  # length of the kick (s); 0 after the last drift
+    for step in range(n_sub):
+        for stage in range(m):
+            kk = step * m + stage
+            kick_h[kk] = kick_b[stage] * h
+            if stage == 0 and step > 0:
+                kick_drift[kk] = drift_merge
+                kick_dt[kk] = float(drift_a[m] + drift_a[0]) * h
+            else:
+                kick_drift[kk] = drift_seq[stage]
+                kick_dt[kk] = float(drift_a[stage]) * h
+    kick_drift[n_kicks] = drift_seq[m]
+    kick_dt[n_kicks] = float(drift_a[m]) * h
     for ch in numba.prange(n_chunks):
         o = chunk_orient[ch]
         lanes = lane_traj[ch]
-        q = np.zeros((N, K, W))
-        p = np.zeros((N, K, W))
-        u = np.zeros((N, W))
-        ud = np.zeros((N, W))
-        force = np.zeros((N, W))
-        gap = np.zeros((N + 1, W))
-        fh = np.zeros((N + 1, W))
-        fcon = np.zeros((N + 1, W))
+        q = np.zeros(N * K * W)  # [N, K, W]
+        p = np.zeros(N * K * W)
+        u = np.zeros(N * W)  # [N, W] primary displacement
+        ud = np.zeros(N * W)  # primary velocity
+        force = np.zeros(N * W)  # contact force on each primary mass (N)
+        scratch = np.zeros((N, W))
         dval = np.zeros(W)
         ddot = np.zeros(W)
         wall = np.zeros(W)  # 1.0 where the lane's drive is a moving wall
         fdrv = np.zeros(W)  # 1.0 where the lane's drive is a force
         work = np.zeros(W)
-        ru = np.zeros(W)
-        rv = np.zeros(W)
+        buf_vel = np.zeros(REC_BLOCK * C * W if rec_vel else 0)  # [REC_BLOCK, C, W]
+        buf_disp = np.zeros(REC_BLOCK * C * W if rec_disp else 0)
         phi = phi0[o]
         d0 = rest[o]
+        x0 = chi[o]
+        half_im0 = 0.5 * inv_m0[o]
+        co = drift[o]
+        q3 = q.reshape((N, K, W))
+        p3 = p.reshape((N, K, W))
+        # the chunk's drives are all zero outside [t_on, t_off) (s)
+        t_on = math.inf
+        t_off = -math.inf
         for b in range(W):
             r = lanes[b]
             if r >= 0:
                 wall[b] = 1.0 if dkind[r] == 0 else 0.0
                 fdrv[b] = 1.0 - wall[b]
+                if prm[r, 0] != 0.0:
+                    t_on = min(t_on, prm[r, 6])
+                    t_off = max(t_off, _drive_end(src[r], prm[r], n_table[r]))
             else:
                 wall[b] = 1.0
         t = 0.0
         n_rec = n_samples
         for s in range(n_samples):
-            # record the state at t = s / rate
+            # record the state at t = s / rate (into the block buffers, copied out every
+            # REC_BLOCK samples)
+            slot = s % REC_BLOCK
             for c in range(C if (rec_vel or rec_disp) else 0):
                 i = rec_idx[o, c]
-                for b in range(W):
-                    ru[b] = 0.0
-                    rv[b] = 0.0
-                for k in range(K):
-                    f = phi[i, k]
-                    for b in range(W):
-                        ru[b] += f * q[i, k, b]
-                        rv[b] += f * p[i, k, b]
-                for b in range(W):
-                    r = lanes[b]
-                    if r >= 0:
-                        if rec_disp:
-                            disp[r, c, s] = ru[b]
-                        if rec_vel:
-                            vel[r, c, s] = rv[b]
+                for g in range(0, W, 4):
+                    if rec_vel:
+                        vstore(buf_vel, (slot * C + c) * W + g, _primary(p, phi, i, W, g))
+                    if rec_disp:
+                        vstore(buf_disp, (slot * C + c) * W + g, _primary(q, phi, i, W, g))
+            if slot == REC_BLOCK - 1 or s == n_samples - 1:
+                _copy_out(buf_vel, vel, lanes, s - slot, slot + 1)
+                _copy_out(buf_disp, disp, lanes, s - slot, slot + 1)
             if rec_drv:
                 for b in range(W):
                     r = lanes[b]
@@ -253,130 +370,125 @@ def run_batch(
                     r = lanes[b]
                     if r < 0 or not quiet:
                         continue
-                    if src[r] == 0:
-                        t_end = prm[r, 6] + prm[r, 2]
-                    else:
-                        t_end = prm[r, 6] + (n_table[r] - 1) / prm[r, 7]
-                    if prm[r, 0] != 0.0 and t <= t_end:
+                    if prm[r, 0] != 0.0 and t <= _drive_end(src[r], prm[r], n_table[r]):
                         quiet = False
                         continue
                     h_static = (n_contacts + (1 if dkind[r] == 0 else 0)) * u0_static
                     left = (
-                        _lane_energy(q, p, u, b, phi, omega[o], 0.0, dkind[r], beta, d0, f0,
-                                     far_wall)
+                        _lane_energy(q3, p3, scratch, b, phi, omega[o], 0.0, dkind[r], beta, d0,
+                                     f0, far_wall)
                         - h_static
                     )  # fmt: skip
                     if left > stop_fraction * work[b]:
                         quiet = False
                 if quiet:
                     n_rec = s + 1
+                    _copy_out(buf_vel, vel, lanes, s - slot, slot + 1)
+                    _copy_out(buf_disp, disp, lanes, s - slot, slot + 1)
                     break
-            for step in range(n_sub):
-                for stage in range(m + 1):
-                    # ---- drift
-                    if stage == 0:
-                        dk = drift_seq[0] if step == 0 else -1
-                        if step == 0:
-                            t += float(drift_a[0]) * h
-                    elif stage == m:
-                        if step == n_sub - 1:
-                            dk = drift_seq[m]
-                            t += float(drift_a[m]) * h
-                        else:
-                            dk = drift_merge
-                            t += float(drift_a[m] + drift_a[0]) * h
+            hk_prev = 0.0  # length (s) of the kick whose forces wait to be applied to p
+            for kk in range(n_kicks + 1):
+                dk = kick_drift[kk]
+                t += kick_dt[kk]
+                # ---- pass 1, per cylinder: the pending kick, the drift, then u and u'
+                for i in range(N):
+                    for g in range(0, W, lane_step):
+                        ja = i * W + g
+                        fa = hk_prev * vload(force, ja)
+                        fb = hk_prev * vload(force, ja + 4) if pairs else fa
+                        ua = vsplat(0.0)
+                        va = vsplat(0.0)
+                        ub = vsplat(0.0)
+                        vb = vsplat(0.0)
+                        for k in range(K):
+                            c0 = vsplat(co[dk, i, k, 0])
+                            c1 = vsplat(co[dk, i, k, 1])
+                            c2 = vsplat(co[dk, i, k, 2])
+                            c3 = vsplat(co[dk, i, k, 3])
+                            f = vsplat(phi[i, k])
+                            jm = (i * K + k) * W + g
+                            ua, va = _mode_update(q, p, jm, c0, c1, c2, c3, f, fa, ua, va)
+                            if pairs:
+                                ub, vb = _mode_update(q, p, jm + 4, c0, c1, c2, c3, f, fb, ub, vb)
+                        vstore(u, ja, ua)
+                        vstore(ud, ja, va)
+                        if pairs:
+                            vstore(u, ja + 4, ub)
+                            vstore(ud, ja + 4, vb)
+                hk = kick_h[kk]
+                hk_prev = hk
+                if kk == n_kicks:
+                    break
+                # ---- the drives at t
+                for b in range(W):
+                    r = lanes[b]
+                    if r >= 0 and t_on <= t < t_off:
+                        dval[b], ddot[b] = drive_value(t, src[r], prm[r], tables[r], n_table[r])
                     else:
-                        dk = drift_seq[stage]
-                        t += float(drift_a[stage]) * h
-                    if dk >= 0:
-                        co = drift[o, dk]
-                        for i in range(N):
-                            for k in range(K):
-                                c0 = co[i, k, 0]
-                                c1 = co[i, k, 1]
-                                c2 = co[i, k, 2]
-                                c3 = co[i, k, 3]
-                                for b in range(W):
-                                    q0 = q[i, k, b]
-                                    p0 = p[i, k, b]
-                                    q[i, k, b] = c0 * q0 + c1 * p0
-                                    p[i, k, b] = c2 * q0 + c3 * p0
-                    if stage == m:
-                        break
-                    # ---- kick
-                    hk = kick_b[stage] * h
-                    for i in range(N):
-                        for b in range(W):
-                            u[i, b] = 0.0
-                            ud[i, b] = 0.0
-                        for k in range(K):
-                            f = phi[i, k]
-                            for b in range(W):
-                                u[i, b] += f * q[i, k, b]
-                                ud[i, b] += f * p[i, k, b]
-                    for b in range(W):
-                        r = lanes[b]
-                        if r >= 0:
-                            dv, dd = drive_value(t, src[r], prm[r], tables[r], n_table[r])
-                            dval[b] = dv
-                            ddot[b] = dd
-                    # conservative Hertz forces of every contact (0: left end, N: right end)
-                    for b in range(W):
-                        gap[0, b] = wall[b] * (d0[0] + dval[b] - u[0, b])
-                        gap[N, b] = far_wall * (d0[N] + u[N - 1, b])
-                    for j in range(1, N):
-                        for b in range(W):
-                            gap[j, b] = d0[j] + u[j - 1, b] - u[j, b]
-                    for j in range(N + 1):
-                        for b in range(W):
-                            d = max(gap[j, b], 0.0)
-                            fh[j, b] = beta * d * math.sqrt(d)
-                    for b in range(W):
-                        work[b] += hk * (wall[b] * fh[0, b] * ddot[b] - fdrv[b] * ddot[b] * u[0, b])
-                    for sweep in range(2 if damped else 1):
+                        dval[b] = 0.0
+                        ddot[b] = 0.0
+                # ---- pass 2, along the contacts (0: actuator, j: between cylinders j-1 and j,
+                # N: far end), carrying the left neighbour's values: Hertz forces and dashpots
+                # at the start velocities (sweep 0); damped, the explicit midpoint velocities
+                # u' + (h/2) F / m0 and, one contact behind, the dashpots at those (sweep 1)
+                for g in range(0, W, 4):
+                    wl = vload(wall, g)
+                    fd = vload(fdrv, g)
+                    dv = vload(dval, g)
+                    dd = vload(ddot, g)
+                    drive_force = fd * (f0 + dv)
+                    u_prev = vload(u, g)
+                    v_prev = vload(ud, g)
+                    g_prev = _hertz(wl * (d0[0] + dv - u_prev), beta)
+                    vstore(work, g, vload(work, g) + hk * dd * (wl * g_prev - fd * u_prev))
+                    f_prev = _dashpot(g_prev, x0[0], wl * (dd - v_prev)) + drive_force
+                    m_prev = vsplat(0.0)  # midpoint velocity of cylinder j-2
+                    f1_prev = vsplat(0.0)  # sweep-1 force of contact j-2
+                    for j in range(1, N + 1):
+                        if j < N:
+                            u1 = vload(u, j * W + g)
+                            v1 = vload(ud, j * W + g)
+                            gj = _hertz(d0[j] + u_prev - u1, beta)
+                            fj = _dashpot(gj, x0[j], v_prev - v1)
+                        elif far_wall == 1:  # the far wall, at rest
+                            u1 = vsplat(0.0)
+                            v1 = vsplat(0.0)
+                            gj = _hertz(d0[N] + u_prev, beta)
+                            fj = _dashpot(gj, x0[N], v_prev)
+                        else:  # a free end held by the preload
+                            u1 = vsplat(0.0)
+                            v1 = vsplat(0.0)
+                            gj = vsplat(0.0)
+                            fj = vsplat(f0)
                         if damped:
-                            # Hunt-Crossley dashpots, velocities at the start (sweep 0) then at
-                            # the explicit midpoint ud + (h/2) F / m0 (sweep 1)
-                            x = chi[o, 0]
-                            for b in range(W):
-                                dv = wall[b] * (ddot[b] - ud[0, b])
-                                fcon[0, b] = max(fh[0, b] * (1.0 + x * dv), 0.0)
-                            x = chi[o, N]
-                            for b in range(W):
-                                fcon[N, b] = max(fh[N, b] * (1.0 + x * ud[N - 1, b]), 0.0)
-                            for j in range(1, N):
-                                x = chi[o, j]
-                                for b in range(W):
-                                    dv = ud[j - 1, b] - ud[j, b]
-                                    fcon[j, b] = max(fh[j, b] * (1.0 + x * dv), 0.0)
+                            m1 = v_prev + (hk * half_im0[j - 1]) * (f_prev - fj)
+                            if j == 1:
+                                f1 = _dashpot(g_prev, x0[0], wl * (dd - m1)) + drive_force
+                            else:
+                                f1 = _dashpot(g_prev, x0[j - 1], m_prev - m1)
+                                vstore(force, (j - 2) * W + g, f1_prev - f1)
+                            m_prev = m1
+                            f1_prev = f1
                         else:
-                            for j in range(N + 1):
-                                for b in range(W):
-                                    fcon[j, b] = fh[j, b]
-                        for b in range(W):
-                            fcon[0, b] += fdrv[b] * (f0 + dval[b])
-                            if far_wall == 0:
-                                fcon[N, b] = f0
-                        for i in range(N):
-                            for b in range(W):
-                                force[i, b] = fcon[i, b] - fcon[i + 1, b]
-                        if damped and sweep == 0:
-                            for i in range(N):
-                                x = 0.5 * hk * inv_m0[o, i]
-                                for b in range(W):
-                                    ud[i, b] += x * force[i, b]
-                    for i in range(N):
-                        for k in range(K):
-                            f = hk * phi[i, k]
-                            for b in range(W):
-                                p[i, k, b] += f * force[i, b]
+                            vstore(force, (j - 1) * W + g, f_prev - fj)
+                        u_prev = u1
+                        v_prev = v1
+                        g_prev = gj
+                        f_prev = fj
+                    if damped:  # sweep 1 of the far-end contact
+                        if far_wall == 1:
+                            f1 = _dashpot(g_prev, x0[N], m_prev)
+                        else:
+                            f1 = vsplat(f0)
+                        vstore(force, (N - 1) * W + g, f1_prev - f1)
         # ---- energy at the end (and at the start: the static state)
         for b in range(W):
             r = lanes[b]
             if r < 0:
                 continue
-            dv = drive_value(t, src[r], prm[r], tables[r], n_table[r])[0]
-            hh = _lane_energy(q, p, u, b, phi, omega[o], dv, dkind[r], beta, d0, f0, far_wall)
+            dv_end = drive_value(t, src[r], prm[r], tables[r], n_table[r])[0]
+            hh = _lane_energy(q3, p3, scratch, b, phi, omega[o], dv_end, dkind[r], beta, d0, f0,
+                              far_wall)  # fmt: skip
             energy[r, 0] = (n_contacts + (1 if dkind[r] == 0 else 0)) * u0_static
             energy[r, 1] = hh
             energy[r, 2] = work[b]
@@ -386,5 +498,5 @@ def run_batch(
             if energy.shape[1] >= 6:  # total momentum (kg m/s), oriented: sum_i sqrt(m_i) p_i0
                 mom = 0.0
                 for i in range(N):
-                    mom += p[i, 0, b] / phi[i, 0]
+                    mom += p3[i, 0, b] / phi[i, 0]
                 energy[r, 5] = mom
