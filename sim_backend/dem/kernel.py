@@ -178,9 +178,10 @@ def _copy_out(
     lanes: NDArray[np.int64],  # [W] trajectory of each lane (-1: padding)
     s0: int,
     n: int,
+    sign: float,
 ) -> None:
-    """``out[r, c, s0 + j] = buf[j, c, b]`` for the first ``n`` buffered samples of every lane
-    ``b`` (trajectory ``r``); nothing when the quantity is not recorded (empty buffer)."""
+    """``out[r, c, s0 + j] = sign buf[j, c, b]`` for the first ``n`` buffered samples of every
+    lane ``b`` (trajectory ``r``); nothing when the quantity is not recorded (empty buffer)."""
     W = lanes.size
     C = out.shape[1]
     if buf.size == 0:
@@ -191,7 +192,7 @@ def _copy_out(
             continue
         for c in range(C):
             for j in range(n):
-                out[r, c, s0 + j] = buf[(j * C + c) * W + b]
+                out[r, c, s0 + j] = sign * buf[(j * C + c) * W + b]
 
 
 @numba.njit(inline="always")
@@ -259,8 +260,8 @@ def run_batch(
     f0: float,
     far_wall: int,
     rec_idx: NDArray[np.int64],  # [2, C] oriented indices to record
-    vel: NDArray[np.float64],  # [R, C, S] out
-    disp: NDArray[np.float64],  # [R, C, S] out
+    vel: NDArray[np.float64],  # [R, C, S] out, m/s, positive from cylinder #1 towards #N
+    disp: NDArray[np.float64],  # [R, C, S] out, m, same sign
     drv: NDArray[np.float64],  # [R, S] out
     energy: NDArray[np.float64],  # [R, 3], [R, 5] or [R, 6] out: H(0), H(end), W
     # (, samples, E left (, total momentum at the end, oriented))
@@ -306,6 +307,7 @@ def run_batch(
     kick_dt[n_kicks] = float(drift_a[m]) * h
     for ch in numba.prange(n_chunks):
         o = chunk_orient[ch]
+        sign = -1.0 if o == 1 else 1.0  # recorded along the chain's axis (#1 towards #N)
         lanes = lane_traj[ch]
         q = np.zeros(N * K * W)  # [N, K, W]
         p = np.zeros(N * K * W)
@@ -354,8 +356,8 @@ def run_batch(
                     if rec_disp:
                         vstore(buf_disp, (slot * C + c) * W + g, _primary(q, phi, i, W, g))
             if slot == REC_BLOCK - 1 or s == n_samples - 1:
-                _copy_out(buf_vel, vel, lanes, s - slot, slot + 1)
-                _copy_out(buf_disp, disp, lanes, s - slot, slot + 1)
+                _copy_out(buf_vel, vel, lanes, s - slot, slot + 1, sign)
+                _copy_out(buf_disp, disp, lanes, s - slot, slot + 1, sign)
             if rec_drv:
                 for b in range(W):
                     r = lanes[b]
@@ -383,8 +385,8 @@ def run_batch(
                         quiet = False
                 if quiet:
                     n_rec = s + 1
-                    _copy_out(buf_vel, vel, lanes, s - slot, slot + 1)
-                    _copy_out(buf_disp, disp, lanes, s - slot, slot + 1)
+                    _copy_out(buf_vel, vel, lanes, s - slot, slot + 1, sign)
+                    _copy_out(buf_disp, disp, lanes, s - slot, slot + 1, sign)
                     break
             hk_prev = 0.0  # length (s) of the kick whose forces wait to be applied to p
             for kk in range(n_kicks + 1):

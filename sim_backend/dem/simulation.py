@@ -328,9 +328,7 @@ def simulate(
         for r_stop in np.flatnonzero(n_done < n_samples):
             for a in (vel[r_stop], disp[r_stop], drv[r_stop]):
                 a[..., n_done[r_stop] :] = np.nan
-    flip = orient == 1
-    vel[flip] *= -1.0
-    disp[flip] *= -1.0
+    flip = orient == 1  # the kernel records along the chain's axis already
     work = energy[:, 2]
     gain = energy[:, 1] - energy[:, 0]
     scale = np.maximum(np.abs(work), 1e-300)
