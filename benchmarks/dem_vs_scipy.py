@@ -85,19 +85,21 @@ def flops_per_step(
     Pass 1 (after every drift, m per step plus one per sample): per cylinder the kick length x
     force (N); per mode the pending kick ``p += f F`` (2), the 2x2 drift (6) and, except after
     the sample's last drift, the mode's share of u and u' (4): 12 N K + N, or 8 N K + N.
-    Pass 2 (every kick): per contact the overlap (2), Hertz ``beta d sqrt(d)`` with its max (4),
-    the dashpot at the start velocities (5); damped, the midpoint velocity (3), the dashpot at
-    the midpoint (5) and the force difference (1), else the force difference (1); the actuator
-    contact adds 11 (wall mask, drive force, the wall's work). Recording (every sample): 2 K
-    per recorded cylinder (the velocity).
+    Pass 2 (every kick), per contact: the overlap (2), Hertz ``beta d sqrt(d)`` with its max (4),
+    the force at the start velocities (5); damped, the first stage velocity (3), the force there
+    (5) and the second stage velocity (3), else the force difference (1). Pass 3 (damped), per
+    contact: the force at the second stage (5), ``(k1 + 3 k3) / 4`` (3), the force difference
+    (1). The actuator contact adds 11 (wall mask, drive force, the wall's work). Recording
+    (every sample): 2 K per recorded cylinder (the velocity).
     """
     nk = n_cyl * n_block
     contacts = n_cyl + 1
     pass1 = 12 * nk + n_cyl
     pass1_last = 8 * nk + n_cyl
-    pass2 = (6 + 5 + (3 + 5 + 1 if damped else 1)) * contacts + 11
+    per_contact = 2 + 4 + 5 + (3 + 5 + 3 + 5 + 3 + 1 if damped else 1)
+    contact_passes = per_contact * contacts + 11
     record = 2 * n_block * n_recorded
-    return n_kicks * (pass1 + pass2) + (pass1_last + record) / n_sub
+    return n_kicks * (pass1 + contact_passes) + (pass1_last + record) / n_sub
 
 
 def _rtol_for(scene: AccuracyScene, ref: Any, target: float) -> tuple[Any, list[dict[str, float]]]:

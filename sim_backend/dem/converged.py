@@ -23,6 +23,7 @@ from numpy.typing import NDArray
 
 from sim_backend.dem.accuracy_scenes import AccuracyScene
 from sim_backend.dem.errors import rel_l2
+from sim_backend.dem.kernel import NUMERICS_VERSION
 
 __all__ = ["ConvergedReference", "cache_dir", "converged_reference"]
 
@@ -87,7 +88,10 @@ def converged_reference(
 
     Steps in s; ``tolerance_rel``: relative L2 change (worst cylinder) that ends the halving.
     """
-    method = f"{integrator}|dt0={dt0_s!r}|tol={tolerance_rel!r}|min={min_dt_s!r}"
+    method = (
+        f"{integrator}|dt0={dt0_s!r}|tol={tolerance_rel!r}|min={min_dt_s!r}"
+        f"|kernel={NUMERICS_VERSION}"
+    )
     folder = cache_dir() / "dem-reference"
     path = folder / f"{scene.digest(method)}.npz"
     if use_cache and path.exists():
