@@ -76,7 +76,13 @@ def peak_flops(repeats: int = 5) -> float:
 
 
 def flops_per_step(
-    n_cyl: int, n_block: int, n_kicks: int, n_sub: int, damped: bool, n_recorded: int
+    n_cyl: int,
+    n_block: int,
+    n_kicks: int,
+    n_sub: int,
+    damped: bool,
+    n_recorded: int,
+    heun_kicks: bool = False,
 ) -> float:
     """Floating-point operations of one step of one trajectory in ``kernel.run_batch``, counted
     from its loops (N cylinders, K = J + 1 block modes, m kicks a step, ``n_sub`` steps a
@@ -86,17 +92,19 @@ def flops_per_step(
     force (N); per mode the pending kick ``p += f F`` (2), the 2x2 drift (6) and, except after
     the sample's last drift, the mode's share of u and u' (4): 12 N K + N, or 8 N K + N.
     Pass 2 (every kick), per contact: the overlap (2), Hertz ``beta d sqrt(d)`` with its max (4),
-    the force at the start velocities (5); damped, the first stage velocity (3), the force there
-    (5) and the second stage velocity (3), else the force difference (1). Pass 3 (damped), per
-    contact: the force at the second stage (5), ``(k1 + 3 k3) / 4`` (3), the force difference
-    (1). The actuator contact adds 11 (wall mask, drive force, the wall's work). Recording
-    (every sample): 2 K per recorded cylinder (the velocity).
+    the force at the start velocities (5); damped, the stage velocity (3) and the force there
+    (5); then the force difference (1), or with Heun kicks the second stage velocity (3) and
+    pass 3: the force there (5), ``(k1 + 3 k3) / 4`` (3) and the force difference (1). The
+    actuator contact adds 11 (wall mask, drive force, the wall's work). Recording (every
+    sample): 2 K per recorded cylinder (the velocity).
     """
     nk = n_cyl * n_block
     contacts = n_cyl + 1
     pass1 = 12 * nk + n_cyl
     pass1_last = 8 * nk + n_cyl
-    per_contact = 2 + 4 + 5 + (3 + 5 + 3 + 5 + 3 + 1 if damped else 1)
+    per_contact = 2 + 4 + 5 + 1
+    if damped:
+        per_contact += 3 + 5 + (3 + 5 + 3 if heun_kicks else 0)
     contact_passes = per_contact * contacts + 11
     record = 2 * n_block * n_recorded
     return n_kicks * (pass1 + contact_passes) + (pass1_last + record) / n_sub

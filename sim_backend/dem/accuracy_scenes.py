@@ -72,7 +72,12 @@ class AccuracyScene:
             direction=self.direction, kind=self.kind, amplitude=self.amplitude, burst=burst
         )
 
-    def simulate(self, integrator: str, dt_s: float) -> SimResult:
+    def simulate(
+        self,
+        integrator: str,
+        dt_s: float,
+        dashpot_kick: Literal["midpoint", "heun3"] = "midpoint",
+    ) -> SimResult:
         """The scene run by the compiled ``integrator`` at step ``dt_s`` (s)."""
         return simulate(
             self.chain(),
@@ -81,6 +86,7 @@ class AccuracyScene:
             sample_rate_Hz=self.sample_rate_Hz,
             integrator=integrator,
             dt_s=dt_s,
+            dashpot_kick=dashpot_kick,
         )
 
     @property

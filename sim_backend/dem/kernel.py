@@ -9,24 +9,24 @@ One step of length h is a symmetric splitting ``D(a_0 h) K(b_0 h) D(a_1 h) ... K
 D(a_m h)``: ``D`` is the exact (damped) linear flow of every block mode (a rotation), ``K`` a kick
 by the contact forces on the primary masses (Hertz, tensionless, with a Hunt-Crossley dashpot
 ``F = beta d^1.5 (1 + chi d')``). The positions are fixed during a kick but the dashpots' velocities
-are not: on a damped chain the kick's flow ``m0 v' = F(v)`` is integrated by Heun's third-order
-rule (three force sweeps), whose error, ``O((h c / m0)^4)`` a kick, stays far below the
-splitting's. (An explicit midpoint rule, second order, cost ``blanes-moan4`` its fourth order
-below about 1e-6: its kick weights do not satisfy ``sum b^3 = 0``, which makes the second-order
-error of ``yoshida4`` and ``suzuki4`` cancel.) The last drift of a step and the first of the
-next are merged. The moving wall's
+are not: on a damped chain the kick's flow ``m0 v' = F(v)`` is integrated by the explicit
+midpoint rule (two force sweeps; local error ``O((h c / m0)^3)``) or, with ``heun_kicks``, by
+Heun's third-order rule (three sweeps, ``O((h c / m0)^4)``). The midpoint error adds up over a
+step as ``sum_k b_k^3``, which is 0 for ``yoshida4``, ``suzuki4`` and ``yoshida6`` (their
+triple-jump construction) but not for ``blanes-moan4``: there it is second order, small, and
+visible below an error of about 1e-6 (steps under 1 us); Heun's rule removes it. The last drift
+of a step and the first of the next are merged. The moving wall's
 work is summed as ``sum_k b_k h dV/dt`` (extended phase space) so that ``H(end) - H(0) - W``
 measures the integrator's energy error when the damping is off.
 
 Trajectories are processed in chunks of ``W`` lanes (same orientation, ``W`` a multiple of 4),
 four lanes to a SIMD vector (:mod:`sim_backend.dem.simd`): every operation below acts on four
 trajectories at once, and the per-lane arithmetic is the same whatever the chunk, so a drive's
-result does not depend on the batch around it. One kick costs two passes (four on a damped
-chain): one over the cylinders applies the previous kick to the momenta, drifts every mode and
+result does not depend on the batch around it. One kick costs two passes (three with Heun
+kicks): one over the cylinders applies the previous kick to the momenta, drifts every mode and
 sums the primary displacement and velocity (``u``, ``u'``) in registers; one along the contacts,
-carrying the left neighbour's values in registers, gives the Hertz forces and the forces at the
-start velocities and, one contact behind, the first stage velocities; on a damped chain two more
-passes give the second stage and the kick's forces.
+carrying the neighbours' values in registers, gives the Hertz forces, the forces at the start
+velocities and, one contact behind, the stage velocities and the forces there.
 
 Optional (default off, results bit-for-bit unchanged): ``record_flags`` skips the recording of
 unrequested quantities (bit 0 velocity, 1 displacement, 2 drive; an unrequested output array is
@@ -51,7 +51,7 @@ __all__ = ["NUMERICS_VERSION", "drift_coefficients", "drive_value", "run_batch"]
 
 #: changes whenever the kernel's arithmetic changes its results beyond rounding; cached converged
 #: references (``sim_backend.dem.converged``) are keyed by it
-NUMERICS_VERSION = "2: Heun-3 dashpot kick"
+NUMERICS_VERSION = "2: SIMD kernel"
 
 
 def drift_coefficients(
@@ -278,6 +278,7 @@ def run_batch(
     record_flags: int = 7,  # bit 0 velocity, bit 1 displacement, bit 2 drive
     stop_every: int = 0,  # > 0: check the energy left every stop_every samples
     stop_fraction: float = 0.0,  # stop once energy left <= stop_fraction * input work
+    heun_kicks: int = 0,  # 1: damped kicks by Heun's third-order rule, 0: explicit midpoint
 ) -> None:
     n_chunks, W = lane_traj.shape
     N = phi0.shape[1]
@@ -295,6 +296,8 @@ def run_batch(
     rec_disp = (record_flags & 2) != 0
     rec_drv = (record_flags & 4) != 0
     n_contacts = N - 1 + far_wall
+    heun = heun_kicks == 1
+    first_stage = 1.0 / 3.0 if heun else 0.5  # first stage of a damped kick, in kick lengths
     pairs = W % 8 == 0  # lanes handled eight at a time (two vectors), else four
     lane_step = 8 if pairs else 4
     # one sample = n_sub steps = n_sub m kicks, each after a drift (the last drift of a step
@@ -443,12 +446,13 @@ def run_batch(
                         dval[b] = 0.0
                         ddot[b] = 0.0
                 # ---- pass 2, along the contacts (0: actuator, j: between cylinders j-1 and j,
-                # N: far end), carrying the neighbours' values: Hertz forces (into fh) and the
-                # contact forces at the start velocities, k1 (into k1); undamped, the forces on
-                # the cylinders. Damped, the kick's flow m0 v' = F(v) by Heun's third-order rule:
-                # one contact behind, the first stage velocities va = v + (h/3) k1 / m0 and the
-                # forces k2 at those; two behind, the second stage vb = v + (2h/3) k2 / m0 (into
-                # vs). Pass 3 gives the forces k3 at vb and the kick's (k1 + 3 k3) / 4.
+                # N: far end), carrying the neighbours' values: Hertz forces and the contact
+                # forces at the start velocities, k1; undamped, the forces on the cylinders.
+                # Damped, the kick's flow m0 v' = F(v): one contact behind, the stage velocities
+                # va = v + c h k1 / m0 and the forces k2 at those, c = 1/2 (explicit midpoint:
+                # k2 acts on the cylinders) or 1/3 (Heun's third-order rule: two contacts behind,
+                # the second stage vb = v + (2h/3) k2 / m0 into vs, with fh and k1 kept for
+                # pass 3, which gives the forces k3 at vb and the kick's (k1 + 3 k3) / 4).
                 for g in range(0, W, 4):
                     wl = vload(wall, g)
                     fd = vload(fdrv, g)
@@ -458,10 +462,11 @@ def run_batch(
                     u_prev = vload(u, g)
                     v_prev = vload(ud, g)
                     g_prev = _hertz(wl * (d0[0] + dv - u_prev), beta)
-                    vstore(fh, g, g_prev)
                     vstore(work, g, vload(work, g) + hk * dd * (wl * g_prev - fd * u_prev))
                     f_prev = _dashpot(g_prev, x0[0], wl * (dd - v_prev)) + drive_force
-                    vstore(k1, g, f_prev)
+                    if heun:
+                        vstore(fh, g, g_prev)
+                        vstore(k1, g, f_prev)
                     v_pp = vsplat(0.0)  # start velocity of cylinder j-2
                     va_pp = vsplat(0.0)  # first stage velocity of cylinder j-2
                     k2_pp = vsplat(0.0)  # force k2 of contact j-2
@@ -481,18 +486,23 @@ def run_batch(
                             v1 = vsplat(0.0)
                             gj = vsplat(0.0)
                             fj = vsplat(f0)
-                        vstore(fh, j * W + g, gj)
-                        vstore(k1, j * W + g, fj)
+                        if heun:
+                            vstore(fh, j * W + g, gj)
+                            vstore(k1, j * W + g, fj)
                         if not damped:
                             vstore(force, (j - 1) * W + g, f_prev - fj)
                         else:
-                            va = v_prev + (hk * im0[j - 1] / 3.0) * (f_prev - fj)
+                            va = v_prev + (hk * im0[j - 1] * first_stage) * (f_prev - fj)
                             if j == 1:
                                 k2 = _dashpot(g_prev, x0[0], wl * (dd - va)) + drive_force
                             else:
                                 k2 = _dashpot(g_prev, x0[j - 1], va_pp - va)
-                                vb = v_pp + (hk * im0[j - 2] * (2.0 / 3.0)) * (k2_pp - k2)
-                                vstore(vs, (j - 2) * W + g, vb)
+                                jp = (j - 2) * W + g
+                                if heun:
+                                    vb = v_pp + (hk * im0[j - 2] * (2.0 / 3.0)) * (k2_pp - k2)
+                                    vstore(vs, jp, vb)
+                                else:
+                                    vstore(force, jp, k2_pp - k2)
                             v_pp = v_prev
                             va_pp = va
                             k2_pp = k2
@@ -500,14 +510,18 @@ def run_batch(
                         v_prev = v1
                         g_prev = gj
                         f_prev = fj
-                    if damped:  # the far-end contact's k2, the last cylinder's vb
+                    if damped:  # the far-end contact's k2; the last cylinder's force or vb
                         if far_wall == 1:
                             k2 = _dashpot(g_prev, x0[N], va_pp)
                         else:
                             k2 = vsplat(f0)
-                        vb = v_pp + (hk * im0[N - 1] * (2.0 / 3.0)) * (k2_pp - k2)
-                        vstore(vs, (N - 1) * W + g, vb)
-                if not damped:
+                        jp = (N - 1) * W + g
+                        if heun:
+                            vb = v_pp + (hk * im0[N - 1] * (2.0 / 3.0)) * (k2_pp - k2)
+                            vstore(vs, jp, vb)
+                        else:
+                            vstore(force, jp, k2_pp - k2)
+                if not (damped and heun):
                     continue
                 # ---- pass 3 (damped): the forces k3 at the second stage velocities, and the
                 # kick's forces (k1 + 3 k3) / 4 on the cylinders

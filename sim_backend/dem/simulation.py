@@ -7,7 +7,7 @@ import threading
 import time
 from collections.abc import Collection, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -200,6 +200,7 @@ def simulate(
     stop_energy_fraction: float | None = None,
     stop_check_s: float = 0.5e-3,
     refuse_unstable: bool = True,
+    dashpot_kick: Literal["midpoint", "heun3"] = "midpoint",
 ) -> SimResult:
     """Simulate every drive of ``drives`` on ``chain`` (one compiled batch, parallel over drives).
 
@@ -227,6 +228,12 @@ def simulate(
         times the input work (checked every ``stop_check_s`` s). The result is then truncated at
         the last trajectory's stop; a trajectory of the batch that stopped earlier holds NaN
         after its own stop (``meta["samples_computed"]`` [R]; ``meta["energy_left_rel"]`` [R]).
+    dashpot_kick: how a kick integrates the contact dashpots, whose force depends on the
+        velocities the kick changes: ``"midpoint"`` (explicit midpoint, the default) or
+        ``"heun3"`` (Heun's third-order rule, one more force sweep). The midpoint's error is
+        second order for ``blanes-moan4`` (the other 4th/6th-order schemes cancel it) and shows
+        below an error of about 1e-6, i.e. at steps under 1 us; ``"heun3"`` keeps
+        ``blanes-moan4`` fourth order there for about a quarter more run time.
     """
     t_wall = time.perf_counter()
     name = DEFAULT_INTEGRATOR if integrator == "default" else integrator
@@ -238,6 +245,8 @@ def simulate(
         raise ValueError(f"sample_rate_Hz must be > 0, got {sample_rate_Hz!r}")
     if len(drives) == 0:
         raise ValueError("simulate needs at least one drive")
+    if dashpot_kick not in ("midpoint", "heun3"):
+        raise ValueError(f"dashpot_kick: 'midpoint' or 'heun3', got {dashpot_kick!r}")
     order, a_w, b_w = INTEGRATORS[name]
     modes = block_modes(chain)
     if dt_s is None:
@@ -320,6 +329,7 @@ def simulate(
             h, n_sub, n_samples, chain.beta_c, rest, chain.f0_N,
             1 if chain.far_end == "wall" else 0, rec_idx, vel, disp, drv, energy,
             rec_flags, stop_every, float(stop_energy_fraction or 0.0),
+            1 if dashpot_kick == "heun3" else 0,
         )  # fmt: skip
     n_done = energy[:, 3].astype(np.int64)
     if stop_every > 0:
@@ -339,6 +349,7 @@ def simulate(
         "substeps_per_sample": n_sub,
         "sample_rate_Hz": sample_rate_Hz,
         "damped": chain.damped,
+        "dashpot_kick": dashpot_kick,
         "input_work_J": work,
         "energy_gain_J": gain,
         "energy_residual_rel": (gain - work) / scale,
@@ -357,7 +368,7 @@ def simulate(
             coarse = simulate(
                 chain, drives, duration_s=(n_samples - 1) / sample_rate_Hz,
                 sample_rate_Hz=sample_rate_Hz / 2.0, cylinders=cylinders, integrator=name,
-                dt_s=2.0 * h, record=("velocity",),
+                dt_s=2.0 * h, record=("velocity",), dashpot_kick=dashpot_kick,
             ).velocity  # fmt: skip
             n_c = min(coarse.shape[-1], (vel.shape[-1] + 1) // 2)
             fine = vel[..., ::2][..., :n_c].copy()

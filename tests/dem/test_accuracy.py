@@ -98,12 +98,26 @@ def test_cli_quick_json_and_plot(tmp_path: Path, capsys: pytest.CaptureFixture[s
     out = json.loads(capsys.readouterr().out)
     (scene,) = out["scenes"]
     methods = {m["method"] for m in scene["measurements"]}
-    assert methods == {"blanes-moan4", "yoshida4", "suzuki4", "strang", "DOP853", "RK45"}
+    assert methods == {
+        "blanes-moan4",
+        "blanes-moan4+heun3",
+        "yoshida4",
+        "suzuki4",
+        "strang",
+        "DOP853",
+        "RK45",
+    }
     assert not scene["reference"]["from_cache"]
     for m in scene["measurements"]:
         assert m["wall_s"] > 0 and m["rhs_evals"] >= m["steps"] > 0
         assert 0 <= m["err_driven"] <= m["err_worst"] and m["err_far"] <= m["err_worst"]
-    assert set(scene["orders"]) == {"blanes-moan4", "yoshida4", "suzuki4", "strang"}
+    assert set(scene["orders"]) == {
+        "blanes-moan4",
+        "blanes-moan4+heun3",
+        "yoshida4",
+        "suzuki4",
+        "strang",
+    }
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert main(argv) == 0  # second time: the reference comes from the cache
     assert json.loads(capsys.readouterr().out)["scenes"][0]["reference"]["from_cache"]
