@@ -33,7 +33,7 @@ from sim_backend.dem.scene import (
 
 F_IN_HZ = {"ltr": 8.92e3, "rtl": 6.63e3}
 RATE_HZ = 250e3
-REPEATS = 2
+REPEATS = 5
 
 
 def _measure(fn: Callable[[], Any]) -> tuple[Any, float, float]:
