@@ -244,6 +244,26 @@ def _dashpot(fh: Vec4, chi: float, rel_vel: Vec4) -> Vec4:
     return vmax(fh * (1.0 + chi * rel_vel), vsplat(0.0))
 
 
+@numba.njit(inline="always")
+def _kick_end(
+    heun: bool,
+    vs: NDArray[np.float64],  # [N, W] flat: stage velocities (m/s)
+    force: NDArray[np.float64],  # [N, W] flat: forces on the primary masses (N)
+    j: int,  # index of the cylinder's first lane
+    v_start: Vec4,  # the cylinder's velocity at the kick's start (m/s)
+    step: float,  # 2/3 x kick length / m0 (s/kg)
+    k2_left: Vec4,  # forces k2 of the contacts left and right of the cylinder (N)
+    k2_right: Vec4,
+) -> None:
+    """A damped kick's second sweep done for one cylinder: with Heun kicks its second stage
+    velocity ``v + (2h/3) (k2_left - k2_right) / m0`` (into ``vs``), else (explicit midpoint) the
+    force ``k2_left - k2_right`` on it (into ``force``)."""
+    if heun:
+        vstore(vs, j, v_start + step * (k2_left - k2_right))
+    else:
+        vstore(force, j, k2_left - k2_right)
+
+
 @numba.njit(cache=True, parallel=True)
 def run_batch(
     phi0: NDArray[np.float64],  # [2, N, K] primary component of mass-normalised block modes
@@ -497,12 +517,8 @@ def run_batch(
                                 k2 = _dashpot(g_prev, x0[0], wl * (dd - va)) + drive_force
                             else:
                                 k2 = _dashpot(g_prev, x0[j - 1], va_pp - va)
-                                jp = (j - 2) * W + g
-                                if heun:
-                                    vb = v_pp + (hk * im0[j - 2] * (2.0 / 3.0)) * (k2_pp - k2)
-                                    vstore(vs, jp, vb)
-                                else:
-                                    vstore(force, jp, k2_pp - k2)
+                                step = hk * im0[j - 2] * (2.0 / 3.0)
+                                _kick_end(heun, vs, force, (j - 2) * W + g, v_pp, step, k2_pp, k2)
                             v_pp = v_prev
                             va_pp = va
                             k2_pp = k2
@@ -515,12 +531,8 @@ def run_batch(
                             k2 = _dashpot(g_prev, x0[N], va_pp)
                         else:
                             k2 = vsplat(f0)
-                        jp = (N - 1) * W + g
-                        if heun:
-                            vb = v_pp + (hk * im0[N - 1] * (2.0 / 3.0)) * (k2_pp - k2)
-                            vstore(vs, jp, vb)
-                        else:
-                            vstore(force, jp, k2_pp - k2)
+                        step = hk * im0[N - 1] * (2.0 / 3.0)
+                        _kick_end(heun, vs, force, (N - 1) * W + g, v_pp, step, k2_pp, k2)
                 if not (damped and heun):
                     continue
                 # ---- pass 3 (damped): the forces k3 at the second stage velocities, and the
