@@ -245,6 +245,25 @@ def _dashpot(fh: Vec4, chi: float, rel_vel: Vec4) -> Vec4:
 
 
 @numba.njit(inline="always")
+def _actuator_force(
+    fh: Vec4, chi: float, wall: Vec4, drive_vel: Vec4, v: Vec4, drive_force: Vec4
+) -> Vec4:
+    """Force (N) of the actuator contact on the first cylinder, velocity ``v`` (m/s): the moving
+    wall's Hertz force ``fh`` with its dashpot (``wall`` = 1 on those lanes, else 0 and ``fh`` = 0),
+    plus ``drive_force`` (the preload and drive on force-driven lanes, else 0)."""
+    return _dashpot(fh, chi, wall * (drive_vel - v)) + drive_force
+
+
+@numba.njit(inline="always")
+def _far_end_force(fh: Vec4, chi: float, v: Vec4, far_wall: int, f0: float) -> Vec4:
+    """Force (N) of the far-end contact on the last cylinder, velocity ``v`` (m/s): a wall at rest
+    (Hertz force ``fh`` with its dashpot) or, on a free end, the preload ``f0``."""
+    if far_wall == 1:
+        return _dashpot(fh, chi, v)
+    return vsplat(f0)
+
+
+@numba.njit(inline="always")
 def _kick_end(
     heun: bool,
     vs: NDArray[np.float64],  # [N, W] flat: stage velocities (m/s)
@@ -483,7 +502,7 @@ def run_batch(
                     v_prev = vload(ud, g)
                     g_prev = _hertz(wl * (d0[0] + dv - u_prev), beta)
                     vstore(work, g, vload(work, g) + hk * dd * (wl * g_prev - fd * u_prev))
-                    f_prev = _dashpot(g_prev, x0[0], wl * (dd - v_prev)) + drive_force
+                    f_prev = _actuator_force(g_prev, x0[0], wl, dd, v_prev, drive_force)
                     if heun:
                         vstore(fh, g, g_prev)
                         vstore(k1, g, f_prev)
@@ -496,16 +515,11 @@ def run_batch(
                             v1 = vload(ud, j * W + g)
                             gj = _hertz(d0[j] + u_prev - u1, beta)
                             fj = _dashpot(gj, x0[j], v_prev - v1)
-                        elif far_wall == 1:  # the far wall, at rest
+                        else:  # the far end: a wall at rest, or the preload on a free end
                             u1 = vsplat(0.0)
                             v1 = vsplat(0.0)
-                            gj = _hertz(d0[N] + u_prev, beta)
-                            fj = _dashpot(gj, x0[N], v_prev)
-                        else:  # a free end held by the preload
-                            u1 = vsplat(0.0)
-                            v1 = vsplat(0.0)
-                            gj = vsplat(0.0)
-                            fj = vsplat(f0)
+                            gj = _hertz(d0[N] + u_prev, beta) if far_wall == 1 else vsplat(0.0)
+                            fj = _far_end_force(gj, x0[N], v_prev, far_wall, f0)
                         if heun:
                             vstore(fh, j * W + g, gj)
                             vstore(k1, j * W + g, fj)
@@ -514,7 +528,7 @@ def run_batch(
                         else:
                             va = v_prev + (hk * im0[j - 1] * first_stage) * (f_prev - fj)
                             if j == 1:
-                                k2 = _dashpot(g_prev, x0[0], wl * (dd - va)) + drive_force
+                                k2 = _actuator_force(g_prev, x0[0], wl, dd, va, drive_force)
                             else:
                                 k2 = _dashpot(g_prev, x0[j - 1], va_pp - va)
                                 step = hk * im0[j - 2] * (2.0 / 3.0)
@@ -527,10 +541,7 @@ def run_batch(
                         g_prev = gj
                         f_prev = fj
                     if damped:  # the far-end contact's k2; the last cylinder's force or vb
-                        if far_wall == 1:
-                            k2 = _dashpot(g_prev, x0[N], va_pp)
-                        else:
-                            k2 = vsplat(f0)
+                        k2 = _far_end_force(g_prev, x0[N], va_pp, far_wall, f0)
                         step = hk * im0[N - 1] * (2.0 / 3.0)
                         _kick_end(heun, vs, force, (N - 1) * W + g, v_pp, step, k2_pp, k2)
                 if not (damped and heun):
@@ -539,20 +550,18 @@ def run_batch(
                 # kick's forces (k1 + 3 k3) / 4 on the cylinders
                 for g in range(0, W, 4):
                     v_prev = vload(vs, g)
-                    rel = vload(wall, g) * (vload(ddot, g) - v_prev)
                     d_force = vload(fdrv, g) * (f0 + vload(dval, g))
-                    f_prev = _dashpot(vload(fh, g), x0[0], rel) + d_force
+                    wl = vload(wall, g)
+                    dd = vload(ddot, g)
+                    f_prev = _actuator_force(vload(fh, g), x0[0], wl, dd, v_prev, d_force)
                     f_prev = 0.25 * (vload(k1, g) + 3.0 * f_prev)
                     for j in range(1, N + 1):
                         if j < N:
                             v1 = vload(vs, j * W + g)
                             fj = _dashpot(vload(fh, j * W + g), x0[j], v_prev - v1)
-                        elif far_wall == 1:
-                            v1 = vsplat(0.0)
-                            fj = _dashpot(vload(fh, j * W + g), x0[N], v_prev)
                         else:
                             v1 = vsplat(0.0)
-                            fj = vsplat(f0)
+                            fj = _far_end_force(vload(fh, j * W + g), x0[N], v_prev, far_wall, f0)
                         fj = 0.25 * (vload(k1, j * W + g) + 3.0 * fj)
                         vstore(force, (j - 1) * W + g, f_prev - fj)
                         v_prev = v1
