@@ -167,9 +167,9 @@ def _drive_end(src: int, prm: NDArray[np.float64], n_table: int) -> float:
 
 
 #: samples recorded into a chunk's buffer before they are copied to the output arrays: each
-#: lane's run of samples of one cylinder is then 512 B of the output (8 cache lines), and the
-#: buffer (127 kB for 31 cylinders and 8 lanes) stays out of the way of the state in L1; 16
-#: measured 2-3 % slower on the sweep of ``benchmarks/dem_sweep.py``
+#: lane's run of samples of one cylinder is then 512 B of the output (8 cache lines). The buffer
+#: holds REC_BLOCK x C x W doubles per recorded quantity (127 kB for 31 cylinders and 8 lanes);
+#: 16 measured 2-3 % slower on the sweep of ``benchmarks/dem_sweep.py``
 REC_BLOCK = 64
 
 
