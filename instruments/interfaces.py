@@ -137,6 +137,10 @@ class FunctionGenerator(Instrument, Protocol):
 
     def output(self, channel: int, on: bool) -> None: ...
 
+    def output_state(self, channel: int) -> bool:
+        """Read back whether ``channel``'s output is on (confirms the safe state)."""
+        ...
+
     def trigger(self) -> None:
         """Fire the armed burst (bus trigger)."""
         ...

@@ -253,6 +253,20 @@ class KeysightGenerator:
         if on:  # the trigger out follows the channel being played
             self.transport.write(f"OUTP:TRIG:SOUR CH{channel}")
 
+    def output_state(self, channel: int) -> bool:
+        """Read back ``OUTPn?`` (reply ``1`` or ``0``): whether ``channel``'s output is on.
+
+        The confirmation of the safe state: a silent generator raises
+        :class:`InstrumentTimeout`, a reply other than 0/1 :class:`ReplyError`.
+        """
+        self._check_channel(channel)
+        reply = self.transport.query(f"OUTP{channel}?").strip().upper()
+        if reply in ("1", "+1", "ON"):
+            return True
+        if reply in ("0", "+0", "OFF"):
+            return False
+        raise ReplyError(f"{self.transport.name}: unexpected OUTP{channel}? reply {reply!r}")
+
     def trigger(self) -> None:
         """Bus trigger (``*TRG``): every channel armed with ``TRIG:SOUR BUS`` fires."""
         self.transport.write("*TRG")

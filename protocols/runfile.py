@@ -67,8 +67,8 @@ FORMAT = "biafc-run"
 FORMAT_VERSION = 1
 DIRECTIONS = ("ltr", "rtl")
 Backend = Literal["sim", "hardware", "dem"]
-Status = Literal["running", "complete", "aborted", "failed"]
-STATUSES = ("running", "complete", "aborted", "failed")
+Status = Literal["running", "complete", "aborted", "failed", "unsafe"]
+STATUSES = ("running", "complete", "aborted", "failed", "unsafe")
 
 
 class PointState:
@@ -293,13 +293,22 @@ class RunFileWriter:
         m.attrs["units"] = "s since the unix epoch"
 
     @classmethod
-    def open_existing(cls, path: str | Path, *, swmr: bool = True) -> RunFileWriter:
-        """Re-open an interrupted run file to append points (``--resume``)."""
+    def open_existing(
+        cls,
+        path: str | Path,
+        *,
+        swmr: bool = True,
+        extra_attrs: Mapping[str, Any] | None = None,
+    ) -> RunFileWriter:
+        """Re-open an interrupted run file to append points (``--resume``); ``extra_attrs``
+        are set on the root before SWMR starts."""
         path = Path(path)
         _check_format(path)
         f = h5py.File(path, "r+", libver="latest")
         f.attrs["status"] = "running"
         f.attrs["resumed"] = _now_iso()
+        for key, value in (extra_attrs or {}).items():
+            f.attrs[key] = value
         f.flush()
         if swmr:
             f.swmr_mode = True
@@ -329,6 +338,13 @@ class RunFileWriter:
         """Mark a point that failed after its retries (``done`` = 2) and flush."""
         self._f["scan"][direction]["done"][amplitude_index, cylinder_index] = PointState.FAILED
         self._f.flush()
+
+    def attrs_json(self, name: str) -> Any:
+        """A root attribute holding JSON, decoded (``None`` when absent)."""
+        v = self._f.attrs.get(name)
+        if v is None:
+            return None
+        return json.loads(v.decode() if isinstance(v, bytes) else str(v))
 
     def done_mask(self, direction: str) -> NDArray[np.uint8]:
         """The ``done`` array ``[A, C]`` of one direction."""

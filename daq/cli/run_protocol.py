@@ -2,8 +2,16 @@
 
 Runs a protocol on a bench (default: the shipped simulated bench) into an HDF5 run file.
 Everything is checked before an instrument moves; a bad input is one line on stderr, exit 2.
-Exit 0 on a complete run; 1 when the run ended aborted or failed (the reason on one line);
-130 after Ctrl-C. Progress: a bar with ETA on a terminal, plain lines when piped.
+Exit statuses (:mod:`daq.engine.outcome`): 0 complete; 1 failed or aborted; 2 refused before
+anything moved; 3 unsafe (the generator's outputs could not be confirmed off: the last line
+says what to switch off by hand); 4 finished with failed points (``--resume`` re-measures
+them); 130 Ctrl-C. The last line always says what happened; progress is a bar with ETA on a
+terminal, plain lines when piped.
+
+Ctrl-C is handled from the first moment: while the bench is being connected (nothing driven
+yet) it stops at once; during the run the first Ctrl-C aborts at the next boundary (waits are
+interrupted), a second one interrupts whatever runs; either way the safe state follows and the
+time it took is shown.
 """
 
 from __future__ import annotations
@@ -33,6 +41,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--dry-run", action="store_true", help="validate, print point count and ETA, run nothing"
+    )
+    parser.add_argument(
+        "--accept-bench-change",
+        action="store_true",
+        help="with --resume: continue although the bench differs from the file's "
+        "(the differences and the new bench are recorded in the file)",
     )
     parser.add_argument("--seed", type=int, default=None, help="seed of the simulated bench")
     parser.add_argument("--quiet", action="store_true", help="no progress output")
@@ -144,10 +158,82 @@ def run(args: argparse.Namespace) -> int:
         seed = stored_seed(out)
     if seed is None and bf.bench.simulation is not None:
         seed = bf.bench.simulation.seed
-    return _execute(pf, bf, out, resume, seed, args.quiet)
+    return _execute(
+        pf, bf, out, resume, seed, args.quiet, getattr(args, "accept_bench_change", False)
+    )
 
 
-def _execute(pf: Any, bf: Any, out: Path, resume: bool, seed: int | None, quiet: bool) -> int:
+class _Interrupted(KeyboardInterrupt):
+    """Ctrl-C/SIGTERM before the engine runs, or a second one during the run."""
+
+
+def _execute(
+    pf: Any,
+    bf: Any,
+    out: Path,
+    resume: bool,
+    seed: int | None,
+    quiet: bool,
+    accept_bench_change: bool = False,
+) -> int:
+    from daq.engine.outcome import ExitCode, exit_code, final_line
+
+    interrupted: list[str] = []
+    engine: Any = None
+
+    def on_signal(signum: int, frame: FrameType | None) -> None:
+        name = signal.Signals(signum).name
+        interrupted.append(name)
+        if engine is not None and engine.ending:
+            return  # the safe state is being set and the file closed: never interrupt that
+        if engine is None or len(interrupted) > 1:
+            raise _Interrupted(name)  # nothing driven yet, or asked twice: stop now
+        engine.abort(f"interrupted by {name}")
+        print(
+            f"run_protocol: {name}: aborting, safe state follows (Ctrl-C again to hurry)",
+            file=sys.stderr,
+            flush=True,
+        )
+
+    # installed before anything is imported, connected or compiled
+    old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        try:
+            engine, instruments = _connect(pf, bf, out, resume, seed, accept_bench_change)
+        except _Interrupted as exc:
+            print(
+                f"run_protocol: interrupted by {exc} while connecting the bench: nothing was "
+                "switched on, no file written",
+                file=sys.stderr,
+            )
+            return int(ExitCode.INTERRUPTED if str(exc) == "SIGINT" else ExitCode.FAILED)
+        engine.subscribe(Progress(sys.stdout, quiet))
+        try:
+            try:
+                result = engine.run()
+            except _Interrupted:  # raised outside the engine's own handling: already safe
+                result = engine.result
+            if result is None:
+                raise RuntimeError("the run engine returned no result")
+        finally:
+            instruments.close()
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+    code = exit_code(result, sigint="SIGINT" in interrupted)
+    line = final_line(result)
+    print(line, file=sys.stdout if code == ExitCode.COMPLETE else sys.stderr, flush=True)
+    return int(code)
+
+
+def _connect(
+    pf: Any,
+    bf: Any,
+    out: Path,
+    resume: bool,
+    seed: int | None,
+    accept_bench_change: bool,
+) -> tuple[Any, Any]:
     from daq.bench_assembly import assemble
     from daq.engine import RunEngine
     from instruments.errors import InstrumentError
@@ -157,28 +243,16 @@ def _execute(pf: Any, bf: Any, out: Path, resume: bool, seed: int | None, quiet:
         instruments = assemble(bf, seed=seed)
     except (ConfigError, InstrumentError) as exc:
         raise CliError(str(exc).splitlines()[0]) from None
-    engine = RunEngine(pf, bf, instruments, out, resume=resume, seed=seed)
-    engine.subscribe(Progress(sys.stdout, quiet))
-    interrupted: list[str] = []
-
-    def on_signal(signum: int, frame: FrameType | None) -> None:
-        name = signal.Signals(signum).name
-        interrupted.append(name)
-        engine.abort(f"interrupted by {name}")
-
-    old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        result = engine.run()
-    finally:
-        for s, h in old.items():
-            signal.signal(s, h)
-        instruments.close()
-    if result.status == "complete":
-        failed = f", {result.n_failed} failed point(s) marked" if result.n_failed else ""
-        print(f"complete: {result.n_done} points in {result.wall_s:.1f} s{failed} -> {out}")
-        return 0
-    print(f"run_protocol: run {result.status}: {result.reason} (file {out})", file=sys.stderr)
-    return 130 if interrupted and "SIGINT" in interrupted else 1
+    engine = RunEngine(
+        pf,
+        bf,
+        instruments,
+        out,
+        resume=resume,
+        seed=seed,
+        accept_bench_change=accept_bench_change,
+    )
+    return engine, instruments
 
 
 def main(argv: Sequence[str] | None = None) -> int:

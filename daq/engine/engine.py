@@ -38,10 +38,13 @@ from protocols.bench import BenchFile
 from protocols.runfile import PointState, RunFileWriter, ScanSpec
 from protocols.schema import ProtocolFile
 
-__all__ = ["PointCheckError", "RunEngine", "RunResult"]
+__all__ = ["DeadInstrumentError", "PointCheckError", "RequestRefused", "RunEngine", "RunResult"]
 
 #: a record is "clipped" when |V| reaches this fraction of the input range
 CLIP_FRACTION = 0.995
+
+#: how the reason of a run that went through every point but had failures begins
+_POINTS_FAILED = "finished with failed points:"
 
 
 class PointCheckError(InstrumentError):
@@ -52,16 +55,40 @@ class _Aborted(Exception):
     pass
 
 
+class DeadInstrumentError(InstrumentError):
+    """An instrument stopped answering (its own query timed out): the run stops at once
+    instead of spending every retry of every point on timeouts."""
+
+
+class RequestRefused(Exception):
+    """The request is refused before anything moved (file in use, resume refused); one line."""
+
+
 @dataclass(frozen=True)
 class RunResult:
-    """How a run ended."""
+    """How a run ended.
 
-    status: str  # "complete" | "aborted" | "failed"
+    ``status``: "complete" | "aborted" | "failed" | "unsafe" | "refused". ``n_done``: points
+    measured in the file (of ``n_points``), ``n_measured_now`` of them by this process,
+    ``n_already`` found in the file at a resume; ``n_failed``: points marked failed now.
+    ``unconfirmed``: what could not be confirmed safe (status "unsafe"), each naming the
+    instrument; ``safe_state_s``: seconds from the end request (abort, fault, last point) to
+    the confirmed safe state. ``points_failed_only``: the run went through every point but
+    some failed (exit status 4; ``--resume`` re-measures them).
+    """
+
+    status: str
     reason: str
     path: Path
     n_done: int
     n_failed: int
     wall_s: float
+    n_points: int = 0
+    n_measured_now: int = 0
+    n_already: int = 0
+    unconfirmed: tuple[str, ...] = ()
+    safe_state_s: float | None = None
+    points_failed_only: bool = False
 
 
 class RunEngine:
@@ -93,6 +120,7 @@ class RunEngine:
         *,
         resume: bool = False,
         seed: int | None = None,
+        accept_bench_change: bool = False,
     ) -> None:
         self.protocol_file = protocol
         self.bench_file = bench
@@ -100,17 +128,22 @@ class RunEngine:
         self.out_path = Path(out_path)
         self.resume_mode = resume
         self.seed = seed
+        self.accept_bench_change = accept_bench_change
         self.plan: Plan = make_plan(protocol, bench)
         self._bus = EventBus()
         self._lock = threading.RLock()
         self._state = RunState.IDLE
         self._abort = threading.Event()
         self._abort_reason = ""
+        self._abort_t: float | None = None  # monotonic time of the first abort request
         self._running = threading.Event()  # set while not paused
         self._running.set()
         self._thread: threading.Thread | None = None
         self._writer: RunFileWriter | None = None
         self.result: RunResult | None = None
+        #: True once the run is putting the bench in its safe state and closing the file
+        self.ending = False
+        self._file_lock: Any = None
 
     # -- subscription and controls (thread-safe) -------------------------------------------
     def subscribe(self, callback: Subscriber) -> Callable[[], None]:
@@ -141,6 +174,7 @@ class RunEngine:
         with self._lock:
             if not self._abort.is_set():
                 self._abort_reason = reason
+                self._abort_t = time.monotonic()
             self._abort.set()
             self._running.set()
 
@@ -224,20 +258,54 @@ class RunEngine:
             timeout_s=acq.timeout,
         )
 
-    def _safe_state(self) -> list[str]:
-        problems = []
+    def _generator_name(self) -> str:
         gen = self.instruments.generator
-        for ch in sorted(set(self.bench_file.bench.direction_channel.values())):
+        where = str(getattr(getattr(gen, "transport", None), "name", ""))
+        if "generator" in where.lower():
+            return where
+        return f"generator ({where})" if where else "generator"
+
+    def _safe_state(self) -> tuple[list[str], list[str]]:
+        """Every instrument's safe state, then the generator's outputs read back (``OUTPn?``).
+
+        Returns ``(problems, unconfirmed)``: problems met on the way (logged) and what could
+        not be confirmed off, each naming the instrument and output (the run is then unsafe).
+        A generator that already failed to answer is not asked twice per output: one timeout
+        is enough to know it cannot confirm anything.
+        """
+        problems: list[str] = []
+        gen = self.instruments.generator
+        channels = sorted(set(self.bench_file.bench.direction_channel.values()))
+        dead = False
+        for ch in channels:
             try:
                 gen.output(ch, False)
             except Exception as exc:
                 problems.append(f"generator output {ch} off: {exc}")
+                dead = dead or isinstance(exc, TimeoutError)
+                break  # safe_state() below tries every output once more
         for name, inst in self.instruments.all().items():
+            if name == "generator" and dead:
+                continue
             try:
                 inst.safe_state()
             except Exception as exc:
                 problems.append(f"{name} safe state: {exc}")
-        return problems
+        unconfirmed: list[str] = []
+        gname = self._generator_name()
+        for ch in channels:
+            if dead:
+                unconfirmed.append(f"{gname} output {ch}: it does not answer")
+                continue
+            try:
+                on = bool(gen.output_state(ch))
+            except Exception as exc:
+                unconfirmed.append(f"{gname} output {ch}: cannot read it back ({exc})")
+                dead = dead or isinstance(exc, TimeoutError)
+                continue
+            if on:
+                unconfirmed.append(f"{gname} output {ch}: still ON after OUTP{ch} OFF")
+        return problems, unconfirmed
 
     # -- the run ---------------------------------------------------------------------------
     def run(self) -> RunResult:
@@ -245,6 +313,10 @@ class RunEngine:
         t0 = time.monotonic()
         status, reason = "failed", ""
         n_done = n_failed = 0
+        self._n_already = 0
+        self._n_now = 0
+        self._n_failed_now = 0
+        self._refused = False
         with self._lock:
             if self._state != RunState.IDLE:
                 raise RuntimeError("a RunEngine runs once; make a new one")
@@ -252,18 +324,33 @@ class RunEngine:
         self._emit(EventKind.STATE_CHANGED, "idle -> running", state="running", previous="idle")
         try:
             n_done, n_failed, status, reason = self._run_points(t0)
+        except RequestRefused as exc:
+            status, reason = "refused", str(exc)
+            self._refused = True
         except _Aborted:
             status, reason = "aborted", self._abort_reason or "aborted"
         except KeyboardInterrupt:
-            status, reason = "aborted", "interrupted (Ctrl-C)"
+            status, reason = "aborted", self._abort_reason or "interrupted (Ctrl-C)"
         except InstrumentError as exc:
             status, reason = "failed", f"{type(exc).__name__}: {exc}"
         except Exception as exc:
             status, reason = "failed", f"unexpected {type(exc).__name__}: {exc}"
         finally:
-            problems = self._safe_state()
+            self.ending = True  # a signal handler must not interrupt what follows
+            t_end_request = self._abort_t if status == "aborted" and self._abort_t else None
+            t_end_request = t_end_request or time.monotonic()
+            problems, unconfirmed = self._safe_state()
+            safe_s = time.monotonic() - t_end_request
             for p in problems:
                 self._log("error", p)
+            points_failed_only = status == "failed" and reason.startswith(_POINTS_FAILED)
+            if unconfirmed:
+                from daq.engine.outcome import unsafe_instruction
+
+                prior = f"{status}" + (f": {reason}" if reason else "")
+                status = "unsafe"
+                reason = f"safe state not confirmed after the run ended {prior}"
+                self._log("error", unsafe_instruction(unconfirmed))
             if self._writer is not None:
                 try:
                     n_done = sum(
@@ -274,18 +361,37 @@ class RunEngine:
                     pass
                 level = "info" if status == "complete" else "error"
                 self._log(level, f"run {status}" + (f": {reason}" if reason else ""))
+                if not unconfirmed:
+                    self._log(
+                        "info",
+                        f"safe state confirmed (outputs read back off) in {safe_s:.2f} s"
+                        + ("" if not problems else f" ({len(problems)} problem(s) on the way)"),
+                    )
                 self._log(
                     "info",
-                    "instruments in safe state"
-                    + ("" if not problems else f" (with {len(problems)} problem(s))"),
+                    f"measured now {self._n_now}, already in the file {self._n_already}, "
+                    f"failed {self._n_failed_now} (of {self.plan.n_points})",
                 )
                 try:
                     self._writer.close(status, simulation=self._simulation_attrs())  # type: ignore[arg-type]
                 except Exception as exc:
                     reason = reason or f"closing the run file failed: {exc}"
+            if self._file_lock is not None:
+                self._file_lock.release()
             self._set_state(RunState(status))
             self.result = RunResult(
-                status, reason, self.out_path, n_done, n_failed, time.monotonic() - t0
+                status,
+                reason,
+                self.out_path,
+                n_done,
+                n_failed,
+                time.monotonic() - t0,
+                n_points=self.plan.n_points,
+                n_measured_now=self._n_now,
+                n_already=self._n_already,
+                unconfirmed=tuple(unconfirmed),
+                safe_state_s=None if unconfirmed else safe_s,
+                points_failed_only=points_failed_only,
             )
             self._emit(
                 EventKind.FINISHED,
@@ -295,6 +401,12 @@ class RunEngine:
                 path=str(self.out_path),
                 n_done=n_done,
                 n_failed=n_failed,
+                n_points=self.plan.n_points,
+                n_measured_now=self._n_now,
+                n_already=self._n_already,
+                unconfirmed=list(unconfirmed),
+                safe_state_s=self.result.safe_state_s,
+                points_failed_only=points_failed_only,
             )
         return self.result
 
@@ -350,14 +462,41 @@ class RunEngine:
         inst = self.instruments
         if self._abort.is_set():
             raise _Aborted()
+        from daq.store.lock import FileInUse, RunFileLock
+
+        try:
+            self._file_lock = RunFileLock(self.out_path).acquire()
+        except FileInUse as exc:
+            raise RequestRefused(str(exc)) from None
         if self.resume_mode:
             # the axes come from the file; the instruments are set up after the checks
+            from daq.store import StoreError
             from protocols.runfile import read_run
 
-            stored = read_run(self.out_path)
-            time_s = next(iter(stored.scans.values())).time_s
-            self._writer = resume_run(self.out_path, self.protocol_file, self._scan_specs(time_s))
+            try:
+                stored = read_run(self.out_path)
+                time_s = next(iter(stored.scans.values())).time_s
+                self._writer = resume_run(
+                    self.out_path,
+                    self.protocol_file,
+                    self._scan_specs(time_s),
+                    bench=self.bench_file,
+                    accept_bench_change=self.accept_bench_change,
+                )
+            except StoreError as exc:
+                raise RequestRefused(str(exc)) from None
+            except (OSError, ValueError, StopIteration) as exc:
+                raise RequestRefused(
+                    f"--resume: {self.out_path} cannot be continued ({exc})"
+                ) from None
             self._log("info", f"resumed (seed {self.seed})")
+            overrides = self._writer.attrs_json("bench_overrides_json")
+            if overrides:
+                self._log(
+                    "warning",
+                    "resumed on a different bench (--accept-bench-change): "
+                    + "; ".join(overrides[-1]["differences"]),
+                )
             new_time = self._configure_digitiser()
             if new_time.shape != time_s.shape or not np.allclose(new_time, time_s):
                 raise InstrumentError("the digitiser's time axis differs from the file's")
@@ -377,6 +516,8 @@ class RunEngine:
             self._log("info", f"run started: protocol {proto.name!r}, {self.plan.n_points} points")
             self._prepare(time_s)
         writer = self._writer
+        if self._file_lock.stale_note:
+            self._log("warning", f"{self.out_path.name}: {self._file_lock.stale_note}")
         done = {d: writer.done_mask(d) for d in self.plan.directions}
         todo = [
             p
@@ -385,6 +526,7 @@ class RunEngine:
         ]
         total = self.plan.n_points
         n_done = total - len(todo)
+        self._n_already = n_done
         n_failed = 0
         self._emit(
             EventKind.RUN_STARTED,
@@ -404,8 +546,10 @@ class RunEngine:
             ok = self._measure_point(point, time_s)
             if ok:
                 n_done += 1
+                self._n_now += 1
             else:
                 n_failed += 1
+                self._n_failed_now += 1
                 if proto.on_point_failure == "stop":
                     return (
                         n_done,
@@ -433,6 +577,13 @@ class RunEngine:
         self._check_boundary()
         if n_failed:
             self._log("warning", f"{n_failed} point(s) failed and are marked in the file")
+            return (
+                n_done,
+                n_failed,
+                "failed",
+                f"{_POINTS_FAILED} {n_failed} of {total} points failed (marked in the file); "
+                f"re-measure them with --resume {self.out_path}",
+            )
         return n_done, n_failed, "complete", ""
 
     def _arm_generator(self, point: Point) -> None:
@@ -513,23 +664,33 @@ class RunEngine:
         self._emit(EventKind.POINT_FAILED, last, reason=last, **self._point_data(point, -1))
         return False
 
+    def _ask(self, name: str, fn: Callable[..., Any], *args: Any) -> Any:
+        """Call an instrument; a reply that never comes means a dead link
+        (:class:`DeadInstrumentError`, not retried)."""
+        try:
+            return fn(*args)
+        except InstrumentTimeout as exc:
+            where = self._generator_name() if name == "generator" else name
+            raise DeadInstrumentError(f"{where} stopped answering: {exc}") from exc
+
     def _acquire(
         self, point: Point, time_s: NDArray[np.float64]
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Move, settle, check the signal, take ``averages`` records; velocity (m/s) and drive
         (V), each ``[S]``."""
         proto, bench, inst = self.protocol_file.protocol, self.bench_file.bench, self.instruments
-        inst.stage.move_to(point.position_m)
+        ask = self._ask
+        ask("stage", inst.stage.move_to, point.position_m)
         if not inst.wait(proto.settle, self._abort):
             raise _Aborted()
-        level = float(inst.vibrometer.signal_level())
+        level = float(ask("vibrometer", inst.vibrometer.signal_level))
         if level < bench.vibrometer.min_signal_level:
             raise SignalLostError(
                 f"vibrometer signal level {level:.2f} below {bench.vibrometer.min_signal_level:.2f}"
                 f" at cylinder {point.cylinder}"
             )
-        sens = float(inst.vibrometer.sensitivity_m_per_s_per_V())
-        delay = float(inst.vibrometer.signal_delay_s())
+        sens = float(ask("vibrometer", inst.vibrometer.sensitivity_m_per_s_per_V))
+        delay = float(ask("vibrometer", inst.vibrometer.signal_delay_s))
         clip_V = CLIP_FRACTION * bench.daq.velocity_range
         v_sum = np.zeros_like(time_s)
         d_sum = np.zeros_like(time_s)
@@ -537,8 +698,14 @@ class RunEngine:
             if self._abort.is_set():
                 raise _Aborted()
             inst.digitiser.arm()
-            inst.generator.trigger()
-            rec = inst.digitiser.read()
+            ask("generator", inst.generator.trigger)
+            try:
+                rec = inst.digitiser.read()
+            except InstrumentTimeout:
+                # no trigger: a generator that stopped answering ends the run now, not
+                # after every retry of every point timed out
+                ask("generator", inst.generator.wait_complete)
+                raise
             v = np.asarray(rec.velocity_V, dtype=np.float64)
             d = np.asarray(rec.reference_V, dtype=np.float64)
             if v.shape != time_s.shape or d.shape != time_s.shape:

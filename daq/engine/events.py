@@ -18,7 +18,8 @@ __all__ = ["EventBus", "EventKind", "RunEvent", "RunState", "Subscriber"]
 
 
 class RunState(StrEnum):
-    """States of the run engine: idle -> running <-> paused -> complete | aborted | failed."""
+    """States of the run engine: idle -> running <-> paused -> complete | aborted | failed,
+    and unsafe (the safe state could not be confirmed) or refused (nothing moved)."""
 
     IDLE = "idle"
     RUNNING = "running"
@@ -26,10 +27,18 @@ class RunState(StrEnum):
     COMPLETE = "complete"
     ABORTED = "aborted"
     FAILED = "failed"
+    UNSAFE = "unsafe"
+    REFUSED = "refused"
 
     @property
     def finished(self) -> bool:
-        return self in (RunState.COMPLETE, RunState.ABORTED, RunState.FAILED)
+        return self in (
+            RunState.COMPLETE,
+            RunState.ABORTED,
+            RunState.FAILED,
+            RunState.UNSAFE,
+            RunState.REFUSED,
+        )
 
 
 class EventKind(StrEnum):
@@ -61,7 +70,9 @@ class RunEvent:
     * ``progress``: ``done``, ``total``, ``elapsed_s``, ``eta_s``, ``direction``, ``amplitude``,
       ``cylinder``
     * ``warning``: ``message``
-    * ``finished``: ``status``, ``reason``, ``path``, ``n_done``, ``n_failed``
+    * ``finished``: ``status``, ``reason``, ``path``, ``n_done``, ``n_failed``, ``n_points``,
+      ``n_measured_now``, ``n_already``, ``unconfirmed`` (list of outputs to switch off by
+      hand), ``safe_state_s``, ``points_failed_only`` (as :class:`daq.engine.RunResult`)
     """
 
     kind: EventKind

@@ -322,6 +322,14 @@ class MainWindow(QMainWindow):
                     i.safe_state()
                 except Exception as exc:
                     problems.append(f"{name}: {exc}")
+            for ch in sorted(set(bf.bench.direction_channel.values())):
+                try:
+                    if inst.generator.output_state(ch):
+                        problems.append(f"generator output {ch} still ON: switch it off by hand")
+                except Exception as exc:
+                    problems.append(
+                        f"generator output {ch} not confirmed off ({exc}): switch it off by hand"
+                    )
             if problems:
                 raise RuntimeError("; ".join(problems))
             snap: dict[str, Any] = inst.snapshot()
@@ -548,15 +556,29 @@ class MainWindow(QMainWindow):
                 self._finished(d)
 
     def _finished(self, d: dict[str, Any]) -> None:
+        from daq.engine.outcome import final_line
+
         status = str(d["status"])
         self.last_result = self.engine.result if self.engine is not None else None
         self.run_panel.set_state(status)
-        failed = f", {d['n_failed']} failed" if d.get("n_failed") else ""
-        reason = f": {d['reason']}" if d.get("reason") else ""
         level = "info" if status == "complete" else "error"
-        where = shown_path(d["path"])
-        self.log(f"run {status}{reason} ({d['n_done']} points{failed}) -> {where}", level)
-        self.run_panel.where_label.setText(f"run {status}{reason}")
+        if self.last_result is not None:
+            line = final_line(self.last_result).replace(
+                str(self.last_result.path), shown_path(d["path"])
+            )
+        else:
+            reason = f": {d['reason']}" if d.get("reason") else ""
+            line = f"run {status}{reason}"
+        self.log(line, level)
+        self.run_panel.where_label.setText(line)
+        # unsafe: red and bold until the next run, and in the status bar (no modal dialog: the
+        # person may be at the bench, the text stays until read)
+        style = {"unsafe": "color: #b00000; font-weight: bold;", "complete": ""}.get(
+            status, "color: #b00000;"
+        )
+        self.run_panel.where_label.setStyleSheet(f"QLabel {{ {style} }}" if style else "")
+        if status == "unsafe":
+            self.statusBar().showMessage(line)
         self._redraw()
         self.refresh_snapshot()
         self.run_finished.emit(status)

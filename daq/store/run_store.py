@@ -6,12 +6,16 @@
 * :func:`create_run` writes the provenance: protocol and bench text, every instrument's
   snapshot, software version, host, start time, seed, status ``running``.
 * :func:`resume_run` verifies that the protocol in the file is the one given (same parsed
-  content) and that the scan axes match, then re-opens it to append points and log rows.
+  content), that the bench is the one it was started on (:mod:`daq.store.resume_check`; an
+  explicit override is recorded in the file) and that the scan axes match, then re-opens it to
+  append points and log rows. The caller holds the file's lock (:mod:`daq.store.lock`).
 """
 
 from __future__ import annotations
 
+import json
 import os
+import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, Literal
@@ -20,6 +24,8 @@ import h5py
 import numpy as np
 
 from daq.store.recover import clear_consistency_flags
+from daq.store.resume_check import bench_differences
+from protocols.bench import BenchFile
 from protocols.runfile import ChainInfo, RunFileWriter, ScanSpec, read_run
 from protocols.schema import ProtocolFile, parse_protocol
 from protocols.yamlfile import ConfigError
@@ -84,8 +90,18 @@ def stored_seed(path: Path) -> int | None:
     return None if v is None else int(v)
 
 
-def resume_run(path: Path, pf: ProtocolFile, scans: Sequence[ScanSpec]) -> RunFileWriter:
-    """Re-open ``path`` to continue it with protocol ``pf``; refused when they differ."""
+def resume_run(
+    path: Path,
+    pf: ProtocolFile,
+    scans: Sequence[ScanSpec],
+    *,
+    bench: BenchFile | None = None,
+    accept_bench_change: bool = False,
+) -> RunFileWriter:
+    """Re-open ``path`` to continue it with protocol ``pf`` on ``bench``; refused
+    (:class:`StoreError`) when the protocol, the bench or the scan axes differ. With
+    ``accept_bench_change`` a different bench is accepted and recorded in the file (root
+    attribute ``bench_overrides_json``: a list of {time, differences, bench_yaml})."""
     try:
         run = read_run(path)
     except (OSError, ValueError) as exc:
@@ -101,6 +117,26 @@ def resume_run(path: Path, pf: ProtocolFile, scans: Sequence[ScanSpec]) -> RunFi
             f"--resume: {path} was started with another protocol ({stored.protocol.name!r}); "
             "give the same protocol file"
         )
+    extra: dict[str, Any] = {}
+    if bench is not None:
+        diffs = bench_differences(str(run.attrs.get("bench_yaml", "")), bench, str(path))
+        if diffs and not accept_bench_change:
+            raise StoreError(
+                f"--resume: {path} was started on another bench ({len(diffs)} difference(s): "
+                + "; ".join(diffs)
+                + "); resume on the same bench, or give --accept-bench-change to record "
+                "the change in the file"
+            )
+        if diffs:
+            old = json.loads(str(run.attrs.get("bench_overrides_json", "[]")) or "[]")
+            old.append(
+                {
+                    "time": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+                    "differences": diffs,
+                    "bench_yaml": bench.text,
+                }
+            )
+            extra["bench_overrides_json"] = json.dumps(old)
     for spec in scans:
         got = run.scans.get(spec.direction)
         if (
@@ -115,6 +151,6 @@ def resume_run(path: Path, pf: ProtocolFile, scans: Sequence[ScanSpec]) -> RunFi
             )
     clear_consistency_flags(path)  # a writer killed under SWMR leaves them set
     try:
-        return RunFileWriter.open_existing(path)
+        return RunFileWriter.open_existing(path, extra_attrs=extra)
     except OSError as exc:
         raise StoreError(f"--resume: cannot open {path} for writing ({exc})") from None

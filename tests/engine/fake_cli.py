@@ -1,11 +1,13 @@
 """``python -m engine.fake_cli ARGS...`` (from tests/): run_protocol with the bench replaced by
 the fake instruments (slow reads), for the SIGKILL / SIGINT subprocess tests. Prints the fake
-generator's output states as ``OUTPUTS {...}`` when the run returns."""
+generator's output states as ``OUTPUTS {...}`` when the run returns. ``FAKE_CONNECT_S``: seconds
+the bench assembly takes (to interrupt it)."""
 
 from __future__ import annotations
 
 import os
 import sys
+import time
 
 import daq.bench_assembly
 import daq.cli.run_protocol as rp
@@ -19,6 +21,7 @@ WORLD = FakeWorld(
 
 
 def _assemble(bf, *, seed=None, faults=None):  # type: ignore[no-untyped-def]
+    time.sleep(float(os.environ.get("FAKE_CONNECT_S", "0")))  # a slow connect (or compile)
     WORLD.seed = seed or 0
     return fake_bench(WORLD)
 

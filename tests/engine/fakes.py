@@ -29,6 +29,7 @@ class Faults:
     nan_reads: int = 0
     read_sleep_s: float = 0.0  # wall time per read (to abort / kill mid-scan)
     clip: bool = False
+    generator_dead_after_reads: int | None = None  # the generator stops answering after N reads
 
 
 @dataclass
@@ -51,8 +52,20 @@ class FakeWorld:
 
 
 class FakeGenerator:
+    """Timeouts once dead (commands are lost, outputs stay as they were), like a cut link."""
+
     def __init__(self, w: FakeWorld) -> None:
         self.w = w
+        self.queries = 0  # queries that went unanswered
+
+    def _dead(self) -> bool:
+        n = self.w.faults.generator_dead_after_reads
+        return n is not None and self.w.reads >= n
+
+    def _silent(self, what: str) -> None:
+        if self._dead():
+            self.queries += 1
+            raise InstrumentTimeout(f"fake generator: no reply to {what!r} within 5 s")
 
     def identify(self) -> str:
         return "FAKE,GEN"
@@ -61,18 +74,27 @@ class FakeGenerator:
         self.w.bursts[channel] = config
 
     def output(self, channel: int, on: bool) -> None:
+        if self._dead():
+            return  # a write into a dead link: lost, no error
         self.w.outputs[channel] = on
 
+    def output_state(self, channel: int) -> bool:
+        self._silent(f"OUTP{channel}?")
+        return self.w.outputs[channel]
+
     def trigger(self) -> None:
+        if self._dead():
+            return
         self.w.triggers += 1
         on = [ch for ch, o in self.w.outputs.items() if o]
         if self.w.armed and on:
             self.w.latched = (on[0], self.w.bursts[on[0]].amplitude_Vpp)
 
     def wait_complete(self, timeout_s: float | None = None) -> None:
-        pass
+        self._silent("*OPC?")
 
     def errors(self) -> list[str]:
+        self._silent("SYST:ERR?")
         return []
 
     def snapshot(self) -> dict[str, Any]:
@@ -80,6 +102,8 @@ class FakeGenerator:
 
     def safe_state(self) -> None:
         self.w.safe_calls += 1
+        if self._dead():
+            return
         for ch in self.w.outputs:
             self.w.outputs[ch] = False
 
@@ -185,6 +209,9 @@ class FakeDigitiser:
         w.armed = False
         if w.faults.read_sleep_s:
             time.sleep(w.faults.read_sleep_s)
+        dead = w.faults.generator_dead_after_reads
+        if dead is not None and w.reads >= dead:  # no trigger from a dead generator
+            raise InstrumentTimeout("fake digitiser: no trigger within the timeout")
         if w.faults.timeouts > 0:
             w.faults.timeouts -= 1
             raise InstrumentTimeout("fake digitiser: no trigger within the timeout")

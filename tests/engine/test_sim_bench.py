@@ -192,3 +192,19 @@ def test_sigint_aborts_and_the_emulated_generator_is_off(
     world = made[0].world
     gen = world.transport("generator")
     assert [gen.query(f"OUTP{ch}?").strip() for ch in (1, 2)] == ["0", "0"]
+
+
+def test_a_silent_generator_ends_unsafe_and_the_emulator_output_is_really_on(
+    tmp_path: Path,
+) -> None:
+    """Issue 15: the emulated 33500B stops answering after the 3rd record; its output stays
+    on, so the run must say ``unsafe`` (not "complete"), at once and naming the generator."""
+    eng, inst = _engine(tmp_path, {"generator_silent": True, "after_acquisitions": 3})
+    res = eng.run()
+    assert res.status == "unsafe", res.reason
+    assert "stopped answering" in res.reason
+    assert any(u.startswith("generator (simulated) output 1") for u in res.unconfirmed)
+    assert res.n_failed == 0  # not every retry of every point spent on timeouts
+    assert read_run(eng.out_path).status == "unsafe"
+    inst.world.faults.clear()  # type: ignore[attr-defined]
+    assert not _generator_outputs_off(inst)  # it really is still on

@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from daq.bench_assembly import assemble
 from daq.gui.main_window import MainWindow
 from protocols.runfile import PointState, read_run
 
@@ -187,3 +188,26 @@ def test_export_figures_from_window(qtbot: Any, window: MainWindow, tmp_path: Pa
         win.export_figures(tmp_path / "run.h5", tmp_path / "figs", on_done=cb)
     assert cb.args == [True], win.log_view.lines[-2:]
     assert any((tmp_path / "figs").glob("*.png"))
+
+
+def test_an_unsafe_end_is_shown_in_red_naming_the_output(qtbot: Any, tmp_path: Path) -> None:
+    """Issue 15: the emulated generator stops answering mid-run; the window says ``unsafe`` and
+    what to switch off by hand, as the CLI does, and not "complete"."""
+
+    def silent(bf: Any, seed: int | None) -> Any:
+        return assemble(bf, seed=seed, faults={"generator_silent": True, "after_acquisitions": 3})
+
+    win = MainWindow(None, SMOKE, assembler=silent)
+    win.confirm_close = lambda: True  # type: ignore[method-assign]
+    qtbot.addWidget(win)
+    win.show()
+    win.run_panel.out_edit.setText(str(tmp_path / "u.h5"))
+    connect(qtbot, win)
+    with qtbot.waitSignal(win.run_finished, timeout=60_000) as blocker:
+        win.run_panel.start_button.click()
+    assert blocker.args == ["unsafe"]
+    text = win.run_panel.where_label.text()
+    assert text.startswith("run UNSAFE") and "SWITCH OFF BY HAND" in text and "output 1" in text
+    assert "b00000" in win.run_panel.where_label.styleSheet()
+    assert "SWITCH OFF BY HAND" in win.statusBar().currentMessage()
+    assert read_run(tmp_path / "u.h5").status == "unsafe"

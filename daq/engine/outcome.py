@@ -1,0 +1,86 @@
+"""How a run ends, as an exit status and one last line: the same words in the CLI and the GUI.
+
+Exit statuses of ``run_protocol`` (and of every refusal in ``biafc``):
+
+====  ====================================================================================
+0     complete: every point measured, safe state confirmed
+1     the run failed or was aborted (by the GUI, SIGTERM); safe state confirmed
+2     the request was refused before anything moved (bad input, refused resume, file in use)
+3     unsafe: the safe state could not be confirmed by reading it back; switch off by hand
+4     finished with failed points (marked in the file); ``--resume`` re-measures them
+130   interrupted by Ctrl-C (SIGINT); safe state confirmed
+====  ====================================================================================
+
+"unsafe" wins over every other outcome: whatever else happened, the person at the bench must
+first switch the named output off.
+"""
+
+from __future__ import annotations
+
+from enum import IntEnum
+from typing import Any
+
+__all__ = ["ExitCode", "counts_text", "exit_code", "final_line", "unsafe_instruction"]
+
+
+class ExitCode(IntEnum):
+    """Exit statuses of ``run_protocol`` (documented in the README)."""
+
+    COMPLETE = 0
+    FAILED = 1
+    REFUSED = 2
+    UNSAFE = 3
+    POINTS_FAILED = 4
+    INTERRUPTED = 130
+
+
+def exit_code(result: Any, *, sigint: bool = False) -> ExitCode:
+    """The exit status of a :class:`daq.engine.RunResult` (``sigint``: ended by Ctrl-C)."""
+    status = str(result.status)
+    if status == "unsafe":
+        return ExitCode.UNSAFE
+    if status == "refused":
+        return ExitCode.REFUSED
+    if status == "complete":
+        return ExitCode.COMPLETE
+    if status == "aborted" and sigint:
+        return ExitCode.INTERRUPTED
+    if status == "failed" and getattr(result, "points_failed_only", False):
+        return ExitCode.POINTS_FAILED
+    return ExitCode.FAILED
+
+
+def unsafe_instruction(unconfirmed: list[str] | tuple[str, ...]) -> str:
+    """What the person must do by hand when the safe state is not confirmed."""
+    return (
+        "SWITCH OFF BY HAND: "
+        + "; ".join(unconfirmed)
+        + " (or switch the piezo amplifier off) before touching the chain"
+    )
+
+
+def counts_text(result: Any) -> str:
+    """``"measured now 25, already in the file 6, failed 0 (of 31)"``."""
+    return (
+        f"measured now {result.n_measured_now}, already in the file {result.n_already}, "
+        f"failed {result.n_failed} (of {result.n_points})"
+    )
+
+
+def final_line(result: Any) -> str:
+    """The last line a run prints (the GUI shows the same text)."""
+    status = str(result.status)
+    safe = ""
+    if getattr(result, "safe_state_s", None) is not None and status != "refused":
+        safe = f"; safe state confirmed in {result.safe_state_s:.1f} s"
+    if status == "unsafe":
+        why = f" ({result.reason})" if result.reason else ""
+        return f"run UNSAFE{why}: {unsafe_instruction(result.unconfirmed)}"
+    if status == "refused":
+        return f"run refused: {result.reason}"
+    if status == "complete":
+        return (
+            f"complete: {result.n_done} points in {result.wall_s:.1f} s "
+            f"({counts_text(result)}){safe} -> {result.path}"
+        )
+    return f"run {status}: {result.reason}; {counts_text(result)}{safe} (file {result.path})"

@@ -1,0 +1,222 @@
+"""Runs that never lie (issue 15): an unconfirmed safe state is ``unsafe`` (exit 3) and names
+what to switch off; a dead instrument stops the run at once; failed points are not "complete"
+(exit 4) and a resume re-measures them; refusals are exit 2 (another protocol, another bench,
+a file another process writes); Ctrl-C is clean from the first moment."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import daq.bench_assembly
+from daq.cli import run_protocol as rp
+from daq.engine import RunEngine
+from daq.engine.outcome import ExitCode
+from daq.store.lock import lock_path
+from protocols.runfile import PointState, read_run
+
+from .fakes import FakeWorld, Faults, fake_bench
+from .helpers import PROTOCOL
+from .test_cli import _spawn, _wait_done
+
+
+@pytest.fixture
+def proto_file(tmp_path: Path) -> Path:
+    f = tmp_path / "proto.yaml"
+    f.write_text(PROTOCOL)
+    return f
+
+
+def _use(monkeypatch: pytest.MonkeyPatch, *worlds: FakeWorld) -> list[FakeWorld]:
+    """The next assemblies get these worlds, in turn (seeded as the CLI asks)."""
+    queue = list(worlds)
+    used: list[FakeWorld] = []
+
+    def assemble(bf, seed=None, **k):  # type: ignore[no-untyped-def]
+        w = queue.pop(0) if queue else FakeWorld()
+        w.seed = seed or 0
+        used.append(w)
+        return fake_bench(w)
+
+    monkeypatch.setattr(daq.bench_assembly, "assemble", assemble)
+    return used
+
+
+def _last_err(capsys: pytest.CaptureFixture[str]) -> str:
+    lines = capsys.readouterr().err.strip().splitlines()
+    return lines[-1] if lines else ""
+
+
+# -- safe state ------------------------------------------------------------------------------
+def test_a_generator_that_stops_answering_ends_unsafe_at_once(protocol, bench, out) -> None:
+    w = FakeWorld(faults=Faults(generator_dead_after_reads=4))  # dies after point 2 of 12
+    eng = RunEngine(protocol, bench, fake_bench(w), out)
+    res = eng.run()
+    gen = eng.instruments.generator
+    assert res.status == "unsafe"
+    assert w.outputs[1] is True  # the lost OUTP1 OFF really left it on
+    assert any("output 1" in u and "generator" in u for u in res.unconfirmed)
+    assert res.safe_state_s is None
+    # detected at once: one trigger timeout, one probe, one read-back; no point marked failed
+    assert "stopped answering" in res.reason
+    assert res.n_failed == 0 and res.n_measured_now == 2
+    assert gen.queries <= 2  # type: ignore[attr-defined]
+    run = read_run(out)
+    assert run.status == "unsafe"
+    assert any("SWITCH OFF BY HAND" in m and "output 1" in m for _, _, m in run.log)
+
+
+def test_cli_unsafe_end_is_exit_3_with_a_last_line_naming_the_generator(
+    proto_file, tmp_path, capsys, monkeypatch
+) -> None:
+    _use(monkeypatch, FakeWorld(faults=Faults(generator_dead_after_reads=4)))
+    code = rp.main([str(proto_file), "--out", str(tmp_path / "u.h5"), "--quiet"])
+    assert code == ExitCode.UNSAFE == 3
+    last = _last_err(capsys)
+    assert last.startswith("run UNSAFE") and "SWITCH OFF BY HAND" in last
+    assert "generator" in last and "output 1" in last
+
+
+def test_the_safe_state_is_confirmed_by_reading_the_outputs_back(protocol, bench, out) -> None:
+    res = RunEngine(protocol, bench, fake_bench(FakeWorld()), out).run()
+    assert res.status == "complete" and res.safe_state_s is not None
+    assert any("safe state confirmed" in m for _, _, m in read_run(out).log)
+
+
+# -- failed points ---------------------------------------------------------------------------
+def test_failed_points_are_exit_4_and_a_resume_remeasures_them(
+    proto_file, tmp_path, capsys, monkeypatch
+) -> None:
+    _use(monkeypatch, FakeWorld(faults=Faults(nan_reads=3)), FakeWorld(), FakeWorld())
+    part, full = tmp_path / "part.h5", tmp_path / "full.h5"
+    assert rp.main([str(proto_file), "--out", str(part), "--quiet", "--seed", "4"]) == 4
+    last = _last_err(capsys)
+    assert "1 of 12 points failed" in last and "--resume" in last
+    assert read_run(part).status == "failed"
+    assert rp.main([str(proto_file), "--resume", str(part), "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert "measured now 1, already in the file 11, failed 0" in out
+    assert rp.main([str(proto_file), "--out", str(full), "--quiet", "--seed", "4"]) == 0
+    a, b = read_run(full), read_run(part)
+    assert b.status == "complete"
+    for d in ("ltr", "rtl"):
+        assert np.all(b.scans[d].done == PointState.DONE)
+        np.testing.assert_array_equal(a.scans[d].velocity, b.scans[d].velocity)
+
+
+# -- refusals --------------------------------------------------------------------------------
+def test_a_refused_resume_is_exit_2_not_a_failed_run(
+    proto_file, tmp_path, capsys, monkeypatch
+) -> None:
+    _use(monkeypatch, FakeWorld(faults=Faults(stall_on_move=1)), FakeWorld())
+    f = tmp_path / "r.h5"
+    assert rp.main([str(proto_file), "--out", str(f), "--quiet"]) == 1
+    capsys.readouterr()
+    other = tmp_path / "other.yaml"
+    other.write_text(PROTOCOL.replace("averages: 2", "averages: 3"))
+    assert rp.main([str(other), "--resume", str(f), "--quiet"]) == 2
+    last = _last_err(capsys)
+    assert "refused" in last and "another protocol" in last and "unexpected" not in last
+    assert read_run(f).status == "failed"  # untouched
+
+
+def test_a_resume_on_another_bench_is_refused_with_the_differences(
+    proto_file, tmp_path, capsys, monkeypatch
+) -> None:
+    from protocols.bench import load_bench
+
+    _use(monkeypatch, FakeWorld(faults=Faults(stall_on_move=1)), FakeWorld())
+    f = tmp_path / "b.h5"
+    assert rp.main([str(proto_file), "--out", str(f), "--quiet"]) == 1
+    capsys.readouterr()
+    other = tmp_path / "gain40.yaml"
+    text = load_bench().text
+    other.write_text(text.replace("gain: 20 ", "gain: 40 ").replace("ai0", "ai2"))
+    args = [str(proto_file), "--bench", str(other), "--resume", str(f), "--quiet"]
+    assert rp.main(args) == 2
+    last = _last_err(capsys)
+    assert "another bench" in last and "amplifier.gain: 20 in" in last and "40 now" in last
+    assert "daq.velocity_channel" in last
+    assert int(np.sum(read_run(f).scans["ltr"].done == PointState.DONE)) == 1  # untouched
+    assert rp.main([*args, "--accept-bench-change"]) == 0
+    run = read_run(f)
+    overrides = json.loads(run.attrs["bench_overrides_json"])
+    assert "amplifier.gain" in overrides[0]["differences"][0]
+    assert "gain: 40" in overrides[0]["bench_yaml"]
+    assert any("different bench" in m for _, _, m in run.log)
+
+
+def test_a_second_writer_is_refused_and_the_first_run_completes(
+    proto_file, tmp_path, capsys, monkeypatch
+) -> None:
+    f = tmp_path / "busy.h5"
+    proc = _spawn([str(proto_file), "--out", str(f), "--seed", "2"], read_s=0.04)
+    try:
+        _wait_done(f, 1, proc)
+        _use(monkeypatch, FakeWorld())
+        assert rp.main([str(proto_file), "--resume", str(f), "--quiet"]) == 2
+        last = _last_err(capsys)
+        assert f"process {proc.pid} on {socket.gethostname()}" in last
+        _, stderr = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, stderr
+    run = read_run(f)
+    assert run.status == "complete"
+    assert all(np.all(s.done == PointState.DONE) for s in run.scans.values())
+    assert not lock_path(f).exists()
+
+
+def test_a_stale_lock_of_a_dead_process_is_taken_over(
+    proto_file, tmp_path, capsys, monkeypatch
+) -> None:
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    f = tmp_path / "stale.h5"
+    lock_path(f).write_text(json.dumps({"host": socket.gethostname(), "pid": dead.pid}))
+    _use(monkeypatch, FakeWorld())
+    assert rp.main([str(proto_file), "--out", str(f), "--quiet"]) == 0
+    assert any("stale lock" in m for _, _, m in read_run(f).log)
+    assert not lock_path(f).exists()
+
+
+# -- Ctrl-C ----------------------------------------------------------------------------------
+def test_ctrl_c_while_connecting_is_clean_and_immediate(proto_file, tmp_path) -> None:
+    out = tmp_path / "c.h5"
+    env_extra = {"FAKE_CONNECT_S": "30"}
+    os.environ.update(env_extra)
+    try:
+        proc = _spawn([str(proto_file), "--out", str(out)])
+    finally:
+        os.environ.pop("FAKE_CONNECT_S")
+    time.sleep(1.5)  # imports done, inside the (slow) bench assembly
+    t0 = time.monotonic()
+    proc.send_signal(signal.SIGINT)
+    _, stderr = proc.communicate(timeout=20)
+    assert time.monotonic() - t0 < 5
+    assert proc.returncode == 130, stderr
+    assert "Traceback" not in stderr
+    assert "nothing was switched on" in stderr.strip().splitlines()[-1]
+    assert not out.exists()
+
+
+def test_ctrl_c_during_the_run_shows_the_time_to_the_safe_state(proto_file, tmp_path) -> None:
+    out = tmp_path / "i.h5"
+    proc = _spawn([str(proto_file), "--out", str(out)])
+    _wait_done(out, 1, proc)
+    proc.send_signal(signal.SIGINT)
+    stdout, stderr = proc.communicate(timeout=30)
+    assert proc.returncode == 130, stderr
+    last = stderr.strip().splitlines()[-1]
+    assert last.startswith("run aborted: interrupted by SIGINT")
+    assert "safe state confirmed in" in last
+    assert "OUTPUTS {1: False, 2: False}" in stdout
