@@ -35,9 +35,11 @@ and a reader can follow a run live. HDF5 forbids changing attributes under SWMR,
 from __future__ import annotations
 
 import json
+import os
 import socket
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from importlib.metadata import PackageNotFoundError, version
@@ -47,6 +49,8 @@ from typing import Any, Literal
 import h5py
 import numpy as np
 from numpy.typing import NDArray
+
+from protocols.recover import ClearedView, has_consistency_flags
 
 __all__ = [
     "DIRECTIONS",
@@ -59,6 +63,7 @@ __all__ = [
     "RunFileWriter",
     "ScanData",
     "ScanSpec",
+    "open_for_reading",
     "read_run",
     "software_version",
 ]
@@ -215,12 +220,16 @@ class RunFileWriter:
         """Create ``path`` (refused if it exists) with every dataset of the layout.
 
         Velocity and drive start as NaN, ``done`` as 0. ``simulation`` (optional) becomes the
-        attributes of ``/simulation``.
+        attributes of ``/simulation``. Creation is atomic: the layout is written under a
+        temporary name (``.NAME.PID.part`` beside it) and linked to ``path`` once complete, so a
+        crash while creating leaves no half-made file under the run's name.
         """
         path = Path(path)
         if path.exists():
             raise FileExistsError(f"run file {path} exists already (use --resume to continue it)")
-        f = h5py.File(path, "w", libver="latest")
+        tmp = path.with_name(f".{path.name}.{os.getpid()}.part")
+        tmp.unlink(missing_ok=True)
+        f = h5py.File(tmp, "w", libver="latest")
         try:
             f.attrs["format"] = FORMAT
             f.attrs["format_version"] = FORMAT_VERSION
@@ -252,11 +261,16 @@ class RunFileWriter:
                 for key, value in simulation.items():
                     sim.attrs[key] = value
             f.flush()
+            _publish(tmp, path)
+        except BaseException:
+            f.close()
+            tmp.unlink(missing_ok=True)
+            raise
+        try:
             if swmr:
                 f.swmr_mode = True
         except BaseException:
             f.close()
-            path.unlink(missing_ok=True)
             raise
         return cls(path, f)
 
@@ -384,11 +398,44 @@ class RunFileWriter:
         return self._closed
 
 
+@contextmanager
+def open_for_reading(path: str | Path) -> Iterator[h5py.File]:
+    """Open a run file read-only: through SWMR (also one being written), or, for a file whose
+    writer was killed outside SWMR (while closing), through a view with the consistency
+    flags cleared. The file is never changed."""
+    try:
+        f = h5py.File(path, "r", swmr=True)
+    except OSError:
+        if not Path(path).is_file() or not has_consistency_flags(path):
+            raise
+        with ClearedView(path) as raw, h5py.File(raw, "r") as g:
+            yield g
+        return
+    with f:
+        yield f
+
+
+def _publish(tmp: Path, path: Path) -> None:
+    """Give the finished file ``tmp`` its name ``path``, never replacing an existing file."""
+    try:
+        os.link(tmp, path)  # fails if path exists: no race with another writer
+    except FileExistsError:
+        raise FileExistsError(
+            f"run file {path} exists already (use --resume to continue it)"
+        ) from None
+    except OSError:  # a file system without hard links
+        if path.exists():
+            raise FileExistsError(f"run file {path} exists already") from None
+        os.rename(tmp, path)
+        return
+    tmp.unlink()
+
+
 def _check_format(path: Path) -> None:
     if not path.exists():
         raise FileNotFoundError(f"run file {path} does not exist")
     try:
-        with h5py.File(path, "r", swmr=True) as f:
+        with open_for_reading(path) as f:
             fmt = f.attrs.get("format")
             ver = f.attrs.get("format_version")
     except OSError as exc:
@@ -419,7 +466,7 @@ def read_run(path: str | Path) -> RunData:
     """Read a whole run file (also one still being written, through SWMR)."""
     path = Path(path)
     _check_format(path)
-    with h5py.File(path, "r", swmr=True) as f:
+    with open_for_reading(path) as f:
         attrs = _attr_dict(f)
         snapshot = json.loads(f["snapshot"].attrs.get("json", "{}"))
         c = f["chain"]
@@ -436,8 +483,9 @@ def read_run(path: str | Path) -> RunData:
             if direction not in f["scan"]:
                 continue
             g = f["scan"][direction]
-            for name in ("velocity", "drive", "done", "measured_at"):
-                g[name].refresh()
+            if f.swmr_mode:
+                for name in ("velocity", "drive", "done", "measured_at"):
+                    g[name].refresh()
             scans[direction] = ScanData(
                 direction=direction,
                 amplitudes=g["amplitudes"][...],
@@ -455,7 +503,8 @@ def read_run(path: str | Path) -> RunData:
                 averages=int(g.attrs.get("averages", 1)),
             )
         log_ds = f["log"]
-        log_ds.refresh()
+        if f.swmr_mode:
+            log_ds.refresh()
         log = [
             (
                 float(r["time"]),

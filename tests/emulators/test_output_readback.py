@@ -17,7 +17,7 @@ def _gen() -> tuple[KeysightGenerator, KeysightEmulator]:
 
 
 def test_output_state_reads_the_instrument_not_the_driver() -> None:
-    gen, emu = _gen()
+    gen, _ = _gen()
     assert gen.output_state(1) is False
     gen.transport.write("OUTP1 ON")  # behind the driver's back
     assert gen.output_state(1) is True

@@ -1,0 +1,29 @@
+"""``biafc repair RUN.h5 [RUN.h5 ...]``: make run files left by a killed writer readable by any
+HDF5 reader, without losing a point (:mod:`daq.store.repair`). Exit 0 when every file opens
+with plain h5py afterwards; 2 when one is refused (not a run file, written by a live process)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+__all__ = ["add_arguments", "run"]
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("files", type=Path, nargs="+", metavar="RUN.h5", help="run file(s)")
+
+
+def run(args: argparse.Namespace) -> int:
+    from daq.store import StoreError
+    from daq.store.repair import repair_run
+
+    code = 0
+    for path in args.files:
+        try:
+            print(f"repaired {repair_run(path).line()}")
+        except StoreError as exc:
+            print(f"biafc repair: refused: {exc}", file=sys.stderr)
+            code = 2
+    return code

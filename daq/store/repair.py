@@ -1,0 +1,115 @@
+"""``biafc repair RUN.h5``: make a run file left by a killed writer readable by any HDF5 reader.
+
+A writer killed (SIGKILL, power cut) leaves the superblock's "open for write" flags set, and
+plain ``h5py.File(path)`` or HDFView refuse the file ("may use h5clear"). Every point was
+flushed, so nothing is lost: :func:`repair_run` takes the file's lock (refused while a live
+process writes it), clears the flags (as ``h5clear -s``), marks a run that was still
+``running`` as ``aborted`` with a log row saying what was kept, removes the killed writer's
+leftovers (its stale lock, a half-made ``.NAME.PID.part``), and checks that plain h5py opens
+the result and sees the same points.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from daq.store.lock import RunFileLock, _alive
+from daq.store.run_store import StoreError
+from protocols.recover import clear_consistency_flags, has_consistency_flags
+from protocols.runfile import PointState, RunFileError, RunFileWriter, read_run
+
+__all__ = ["RepairReport", "repair_run"]
+
+
+@dataclass
+class RepairReport:
+    """What :func:`repair_run` found and did."""
+
+    path: Path
+    status_before: str
+    status_after: str
+    n_done: int
+    n_failed: int
+    n_pending: int
+    actions: list[str] = field(default_factory=list)
+
+    def line(self) -> str:
+        did = "; ".join(self.actions) if self.actions else "nothing to repair"
+        return (
+            f"{self.path}: {did}; {self.n_done} point(s) measured, {self.n_failed} failed, "
+            f"{self.n_pending} pending; status {self.status_after}; opens with plain h5py"
+        )
+
+
+def _counts(path: Path) -> tuple[int, int, int]:
+    run = read_run(path)
+    done = [s.done for s in run.scans.values()]
+    n_done = sum(int(np.sum(d == PointState.DONE)) for d in done)
+    n_failed = sum(int(np.sum(d == PointState.FAILED)) for d in done)
+    return n_done, n_failed, sum(d.size for d in done) - n_done - n_failed
+
+
+def _leftovers(path: Path) -> list[Path]:
+    """Half-made ``.NAME.PID.part`` files of writers that no longer run."""
+    out = []
+    for part in path.parent.glob(f".{path.name}.*.part"):
+        try:
+            pid = int(part.name[len(path.name) + 2 : -len(".part")])
+        except ValueError:
+            continue
+        if not _alive(pid, None):
+            out.append(part)
+    return out
+
+
+def repair_run(path: str | Path) -> RepairReport:
+    """Repair ``path`` in place (see the module); raises :class:`StoreError` (one line) when
+    it is not a run file or another process writes it."""
+    from daq.store.lock import FileInUse
+
+    path = Path(path)
+    if not path.is_file():
+        raise StoreError(f"{path} does not exist")
+    lock = RunFileLock(path)
+    try:
+        lock.acquire()
+    except FileInUse as exc:
+        raise StoreError(str(exc)) from None
+    try:
+        actions = [lock.stale_note] if lock.stale_note else []
+        try:
+            before_counts = _counts(path)
+            status_before = read_run(path).status
+        except (OSError, RunFileError) as exc:
+            raise StoreError(f"{path} is not a readable biafc run file ({exc})") from None
+        if has_consistency_flags(path):
+            if clear_consistency_flags(path):
+                actions.append("cleared the open-for-write flags of a killed writer")
+        status_after = status_before
+        if status_before == "running":
+            writer = RunFileWriter.open_existing(path, swmr=False)
+            n_done, n_failed, n_pending = before_counts
+            writer.log(
+                "error",
+                f"repaired: the writer was killed; {n_done} point(s) kept, {n_failed} failed, "
+                f"{n_pending} pending (continue with --resume)",
+            )
+            writer.close("aborted")
+            status_after = "aborted"
+            actions.append("marked the run aborted (it was still 'running')")
+        for part in _leftovers(path):
+            part.unlink(missing_ok=True)
+            actions.append(f"removed the half-made {part.name}")
+        with h5py.File(path, "r") as f:  # what any reader does
+            if f.attrs.get("format") != "biafc-run":
+                raise StoreError(f"{path}: not readable after the repair")
+        after_counts = _counts(path)
+        if after_counts != before_counts:
+            raise StoreError(f"{path}: points changed during the repair {before_counts}")
+        return RepairReport(path, status_before, status_after, *after_counts, actions=actions)
+    finally:
+        lock.release()
