@@ -17,6 +17,7 @@ drive.
 
 from __future__ import annotations
 
+import functools
 import json
 import threading
 import time
@@ -53,6 +54,27 @@ class PointCheckError(InstrumentError):
 
 class _Aborted(Exception):
     pass
+
+
+def _jsonable(obj: Any) -> Any:
+    """A JSON-ready copy of a settings object (dataclasses, pydantic models, arrays)."""
+    import dataclasses
+
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        return {f.name: _jsonable(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
+    if hasattr(obj, "model_dump"):
+        return _jsonable(obj.model_dump())
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if obj is None or isinstance(obj, bool | int | float | str):
+        return obj
+    return str(obj)
 
 
 class DeadInstrumentError(InstrumentError):
@@ -435,6 +457,43 @@ class RunEngine:
             "dem_runs_json": json.dumps(runs, default=float),
         }
 
+    def _snapshot(self) -> dict[str, Any]:
+        """Every instrument's ``snapshot()``, what each reports when asked now (``read_back``:
+        identity, outputs, decoder range and sensitivity, stage position, digitiser rate) and,
+        on the simulated bench, the model's parameters (``simulation_model``)."""
+        inst = self.instruments
+        snap = inst.snapshot()
+        gen, vib, stage = inst.generator, inst.vibrometer, inst.stage
+        channels = sorted(set(self.bench_file.bench.direction_channel.values()))
+        asks: dict[str, dict[str, Callable[[], Any]]] = {
+            "generator": {
+                "identity": gen.identify,
+                **{f"output{ch}_on": functools.partial(gen.output_state, ch) for ch in channels},
+            },
+            "vibrometer": {
+                "identity": vib.identify,
+                "range": vib.velocity_range,
+                "sensitivity_m_per_s_per_V": vib.sensitivity_m_per_s_per_V,
+                "signal_delay_s": vib.signal_delay_s,
+                "bandwidth_Hz": vib.bandwidth_Hz,
+            },
+            "stage": {"homed": stage.is_homed, "position_m": stage.position},
+        }
+        read_back: dict[str, dict[str, Any]] = {}
+        for name, items in asks.items():
+            read_back[name] = {}
+            for key, fn in items.items():
+                try:
+                    read_back[name][key] = fn()
+                except Exception as exc:
+                    read_back[name][key] = f"error: {exc}"
+        read_back["digitiser"] = {"sample_rate_Hz": getattr(self, "_rate_Hz", None)}
+        snap["read_back"] = read_back
+        config = getattr(inst.world, "config", None)
+        if config is not None:
+            snap["simulation_model"] = _jsonable(config)
+        return snap
+
     def _configure_digitiser(self) -> NDArray[np.float64]:
         """Set the vibrometer range and configure the acquisition (both before the snapshot);
         returns the time axis ``[S]`` (s from the trigger)."""
@@ -443,6 +502,7 @@ class RunEngine:
             inst.vibrometer.set_velocity_range(bench.vibrometer.range)
         cfg = self._acquisition_config()
         rate = float(self.instruments.digitiser.configure(cfg))
+        self._rate_Hz = rate
         self._coerced = abs(rate - cfg.sample_rate_Hz) > 1e-6 * cfg.sample_rate_Hz
         return (np.arange(cfg.n_samples) - cfg.n_pretrigger) / rate
 
@@ -510,7 +570,7 @@ class RunEngine:
                 scans=self._scan_specs(time_s),
                 protocol_yaml=self.protocol_file.text,
                 bench_yaml=self.bench_file.text,
-                snapshot=inst.snapshot(),
+                snapshot=self._snapshot(),
                 seed=self.seed,
             )
             self._log("info", f"run started: protocol {proto.name!r}, {self.plan.n_points} points")

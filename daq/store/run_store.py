@@ -67,8 +67,10 @@ def create_run(
     seed: int | None,
 ) -> RunFileWriter:
     """A new run file with its provenance (status ``running``)."""
+    from daq.store.provenance import provenance_attrs
+
     path.parent.mkdir(parents=True, exist_ok=True)
-    extra: dict[str, Any] = {}
+    extra: dict[str, Any] = provenance_attrs()
     if seed is not None:
         extra["seed"] = int(seed)
     return RunFileWriter.create(
@@ -117,7 +119,12 @@ def resume_run(
             f"--resume: {path} was started with another protocol ({stored.protocol.name!r}); "
             "give the same protocol file"
         )
+    from daq.store.provenance import provenance_attrs
+
     extra: dict[str, Any] = {}
+    resumes = json.loads(str(run.attrs.get("resumes_json", "[]")) or "[]")
+    resumes.append(provenance_attrs())
+    extra["resumes_json"] = json.dumps(resumes)
     if bench is not None:
         diffs = bench_differences(str(run.attrs.get("bench_yaml", "")), bench, str(path))
         if diffs and not accept_bench_change:
