@@ -778,6 +778,9 @@ class RunEngine:
                 )
             v_sum += v
             d_sum += d
+        errs = ask("generator", inst.generator.errors)
+        if errs:  # an error the generator queued while playing: the records cannot be trusted
+            raise InstrumentError(f"generator reported: {'; '.join(errs)}")
         v_mean = v_sum / proto.averages * sens
         if delay != 0.0:  # the decoder output lags: v_true(t) = v_out(t + delay)
             v_mean = np.interp(time_s + delay, time_s, v_mean)

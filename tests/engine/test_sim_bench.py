@@ -208,3 +208,14 @@ def test_a_silent_generator_ends_unsafe_and_the_emulator_output_is_really_on(
     assert read_run(eng.out_path).status == "unsafe"
     inst.world.faults.clear()  # type: ignore[attr-defined]
     assert not _generator_outputs_off(inst)  # it really is still on
+
+
+def test_a_generator_error_during_the_last_point_is_not_complete(tmp_path: Path) -> None:
+    """Issue 15 (found by the fault campaign): an SCPI error queued while the last point
+    played was never read and the run ended "complete"; the queue is read after every point."""
+    eng, _ = _engine(tmp_path, {"generator_scpi_error": '-222,"Data out of range"',
+                                "after_acquisitions": 10})  # fmt: skip
+    res = eng.run()
+    assert res.status == "failed", res.reason
+    assert "-222" in res.reason
+    assert read_run(eng.out_path).status == "failed"
