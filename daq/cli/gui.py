@@ -17,9 +17,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from daq.gui.app import check_paths, run_window
+    from daq.gui.app import check_paths, display_problem, run_window
 
-    err = check_paths(args)
+    err = check_paths(args) or display_problem()
     if err is not None:
         raise CliError(err)
     return run_window(args)

@@ -4,29 +4,66 @@ the bench window."""
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-__all__ = ["add_arguments", "main", "run_window"]
+__all__ = ["add_arguments", "check_paths", "display_problem", "main", "run_window"]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--bench", type=Path, default=None, help="bench file (default: the simulated bench)"
     )
-    parser.add_argument("--protocol", type=Path, default=None, help="protocol file to open")
+    parser.add_argument(
+        "--protocol",
+        type=Path,
+        default=None,
+        help="protocol file to open (a path, or the name of a shipped protocol, e.g. smoke)",
+    )
     parser.add_argument("--run", type=Path, default=None, help="run file to browse")
     parser.add_argument("--connect", action="store_true", help="connect the bench at start")
 
 
 def check_paths(args: argparse.Namespace) -> str | None:
-    """The first missing file named on the command line, as a one-line message, or None."""
-    for flag in ("bench", "protocol", "run"):
+    """The first missing file named on the command line, as a one-line message, or None.
+
+    ``--protocol`` takes the name of a shipped protocol as ``run_protocol`` does (``smoke``,
+    ``ltr_highamp.yaml``); ``args.protocol`` is replaced by the file found."""
+    from protocols.schema import resolve_protocol_path, shipped_protocols
+
+    if args.protocol is not None:
+        args.protocol = resolve_protocol_path(args.protocol)
+        if not Path(args.protocol).is_file():
+            names = ", ".join(sorted(shipped_protocols()))
+            return f"--protocol: {args.protocol} does not exist (shipped protocols: {names})"
+    for flag in ("bench", "run"):
         p = getattr(args, flag)
         if p is not None and not Path(p).is_file():
             return f"--{flag}: {p} does not exist"
     return None
+
+
+def display_problem(env: dict[str, str] | None = None, platform: str | None = None) -> str | None:
+    """Why the window cannot open here (one line saying what to do), or None.
+
+    On Linux Qt's default platform (xcb) needs an X display (``DISPLAY``) or Wayland
+    (``WAYLAND_DISPLAY``); without one Qt aborts the process with a long xcb message. An
+    explicit ``QT_QPA_PLATFORM`` other than xcb (offscreen, wayland, vnc...) is left to Qt."""
+    env = dict(os.environ) if env is None else env
+    platform = sys.platform if platform is None else platform
+    if not platform.startswith("linux"):
+        return None
+    qpa = env.get("QT_QPA_PLATFORM", "").split(":")[0]
+    if qpa and qpa != "xcb":
+        return None
+    if env.get("DISPLAY") or (not qpa and env.get("WAYLAND_DISPLAY")):
+        return None
+    return (
+        "no display to open the window on (DISPLAY is not set): log in with ssh -X (or -Y) to "
+        "show it here, or set QT_QPA_PLATFORM=offscreen to run it without a screen"
+    )
 
 
 def run_window(args: argparse.Namespace) -> int:
@@ -50,7 +87,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="biafc-gui", description="The biafc-lab bench window.")
     add_arguments(parser)
     args = parser.parse_args(argv)
-    err = check_paths(args)
+    err = check_paths(args) or display_problem()
     if err is not None:
         print(f"biafc-gui: error: {err}", file=sys.stderr)
         return 2
