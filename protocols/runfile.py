@@ -66,6 +66,7 @@ __all__ = [
     "open_for_reading",
     "read_run",
     "software_version",
+    "stored_texts",
 ]
 
 FORMAT = "biafc-run"
@@ -460,6 +461,16 @@ def _attr_dict(obj: h5py.HLObject) -> dict[str, Any]:
 def _opt(value: Any) -> float | None:
     v = float(value)
     return None if np.isnan(v) else v
+
+
+def stored_texts(path: str | Path) -> tuple[str, str]:
+    """``(protocol_yaml, bench_yaml)``: the texts a run file was started with."""
+    path = Path(path)
+    _check_format(path)
+    with open_for_reading(path) as f:
+        texts = [f.attrs.get(k, "") for k in ("protocol_yaml", "bench_yaml")]
+    p, b = (t.decode() if isinstance(t, bytes) else str(t) for t in texts)
+    return p, b
 
 
 def read_run(path: str | Path) -> RunData:

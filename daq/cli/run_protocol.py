@@ -1,4 +1,5 @@
 """``run_protocol PROTOCOL.yaml [--bench BENCH.yaml] [--out RUN.h5] [--resume RUN.h5] [--dry-run]``
+or ``run_protocol --resume RUN.h5``
 
 Runs a protocol on a bench (default: the shipped simulated bench) into an HDF5 run file.
 Everything is checked before an instrument moves; a bad input is one line on stderr, exit 2.
@@ -7,6 +8,10 @@ anything moved; 3 unsafe (the generator's outputs could not be confirmed off: th
 says what to switch off by hand); 4 finished with failed points (``--resume`` re-measures
 them); 130 Ctrl-C. The last line always says what happened; progress is a bar with ETA on a
 terminal, plain lines when piped.
+
+``--resume RUN.h5`` alone continues a run with the protocol stored in the file, on the bench
+stored in it (unless ``--bench`` is given); with a protocol given, that protocol must be the
+file's.
 
 Ctrl-C is handled from the first moment: while the bench is being connected (nothing driven
 yet) it stops at once; during the run the first Ctrl-C aborts at the next boundary (waits are
@@ -31,9 +36,19 @@ __all__ = ["add_arguments", "main", "run"]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("protocol", type=Path, help="protocol file (YAML)")
     parser.add_argument(
-        "--bench", type=Path, default=None, help="bench file (default: the simulated bench)"
+        "protocol",
+        type=Path,
+        nargs="?",
+        default=None,
+        help="protocol file (YAML) or the name of a shipped protocol; optional with --resume "
+        "(the file's own protocol is used)",
+    )
+    parser.add_argument(
+        "--bench",
+        type=Path,
+        default=None,
+        help="bench file (default: the simulated bench; with --resume, the file's bench)",
     )
     parser.add_argument("--out", type=Path, default=None, help="run file to write (HDF5)")
     parser.add_argument(
@@ -118,14 +133,34 @@ class Progress:
 
 
 def _load(args: argparse.Namespace) -> tuple[Any, Any, Any]:
+    """Protocol, bench and plan; with ``--resume`` whatever is not given comes from the file."""
     from daq.engine import make_plan
+    from daq.store import StoreError, check_output_path, stored_request
     from protocols.bench import load_bench
-    from protocols.schema import load_protocol
+    from protocols.schema import load_protocol, shipped_protocols
     from protocols.yamlfile import ConfigError
 
+    if args.protocol is None and args.resume is None:
+        names = ", ".join(shipped_protocols())
+        raise CliError(
+            "give a protocol (a file, or a shipped one: "
+            f"{names}), or --resume RUN.h5 to continue a run"
+        )
+    stored: tuple[Any, Any] | None = None
+    if args.resume is not None and (args.protocol is None or args.bench is None):
+        try:
+            check_output_path(args.resume, resume=True)
+            stored = stored_request(args.resume)
+        except StoreError as exc:
+            raise CliError(str(exc)) from None
     try:
-        pf = load_protocol(args.protocol)
-        bf = load_bench(args.bench)
+        pf = load_protocol(args.protocol) if args.protocol is not None else None
+        bf = load_bench(args.bench) if args.bench is not None else None
+        if stored is not None:
+            pf, bf = pf or stored[0], bf or stored[1]
+        elif bf is None:
+            bf = load_bench(None)
+        assert pf is not None and bf is not None
         plan = make_plan(pf, bf)
     except ConfigError as exc:
         raise CliError(str(exc)) from None
@@ -142,6 +177,8 @@ def run(args: argparse.Namespace) -> int:
     pf, bf, plan = _load(args)
     resume = args.resume is not None
     out: Path = args.resume if resume else (args.out or pf.protocol.output_path())
+    if not resume and args.out is not None and args.out.is_dir():
+        out = args.out / pf.protocol.output_path().name  # a folder: the protocol's file name in it
     try:
         check_output_path(out, resume=resume)
     except StoreError as exc:

@@ -5,7 +5,15 @@ from daq.store.run_store import (
     check_output_path,
     create_run,
     resume_run,
+    stored_request,
     stored_seed,
 )
 
-__all__ = ["StoreError", "check_output_path", "create_run", "resume_run", "stored_seed"]
+__all__ = [
+    "StoreError",
+    "check_output_path",
+    "create_run",
+    "resume_run",
+    "stored_request",
+    "stored_seed",
+]

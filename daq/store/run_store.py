@@ -30,28 +30,80 @@ from protocols.runfile import ChainInfo, RunFileWriter, ScanSpec, read_run
 from protocols.schema import ProtocolFile, parse_protocol
 from protocols.yamlfile import ConfigError
 
-__all__ = ["StoreError", "check_output_path", "create_run", "resume_run", "stored_seed"]
+__all__ = [
+    "StoreError",
+    "check_output_path",
+    "create_run",
+    "resume_run",
+    "stored_request",
+    "stored_seed",
+]
 
 
 class StoreError(ValueError):
     """The output or resume file cannot be used; the message is one line."""
 
 
+def _free_name(path: Path) -> Path:
+    """The first ``NAME_2.h5``, ``NAME_3.h5``... beside ``path`` that does not exist."""
+    for k in range(2, 10_000):
+        cand = path.with_name(f"{path.stem}_{k}{path.suffix or '.h5'}")
+        if not cand.exists():
+            return cand
+    return path.with_name(f"{path.stem}_new{path.suffix or '.h5'}")
+
+
+def _run_status(path: Path) -> str | None:
+    """The ``status`` of a biafc run file, or ``None`` when ``path`` is not one."""
+    from protocols.runfile import FORMAT, open_for_reading
+
+    try:
+        with open_for_reading(path) as f:
+            if f.attrs.get("format") != FORMAT:
+                return None
+            status = f.attrs.get("status", "")
+    except (OSError, ValueError):
+        return None
+    return status.decode() if isinstance(status, bytes) else str(status)
+
+
 def check_output_path(path: Path, *, resume: bool = False) -> None:
-    """Refuse a path that cannot take a new run (or, resuming, a missing file)."""
+    """Refuse a path that cannot take a new run (or, resuming, a missing or complete file);
+    each message says what to do instead."""
     if resume:
+        if path.is_dir():
+            raise StoreError(f"--resume: {path} is a folder; give the run file to continue")
         if not path.is_file():
             raise StoreError(f"--resume: {path} does not exist")
         if not os.access(path, os.W_OK):
             raise StoreError(f"--resume: {path} is not writable")
+        if _run_status(path) == "complete":
+            raise StoreError(
+                f"--resume: {path} is complete already, nothing to continue; to measure again "
+                f"write a new file (--out {_free_name(path)})"
+            )
         return
+    if path.is_dir():
+        raise StoreError(f"--out: {path} is a folder; give a run file name (e.g. {path}/run.h5)")
     if path.exists():
-        raise StoreError(f"--out: {path} exists already (use --resume {path} to continue it)")
+        status = _run_status(path)
+        if status is None:
+            why = "exists already and is not a run file"
+        elif status == "complete":
+            why = "is a complete run already"
+        else:
+            raise StoreError(
+                f"--out: {path} exists already (a run left {status}): continue it with "
+                f"--resume {path}, or write a new file (--out {_free_name(path)})"
+            )
+        raise StoreError(f"--out: {path} {why}; write a new file (--out {_free_name(path)})")
     parent = path.parent if str(path.parent) else Path(".")
     probe = parent
     while not probe.exists():
         probe = probe.parent
-    if not probe.is_dir() or not os.access(probe, os.W_OK | os.X_OK):
+    if not probe.is_dir():
+        raise StoreError(f"--out: cannot write {path}: {probe} is a file, not a folder")
+    if not os.access(probe, os.W_OK | os.X_OK):
         raise StoreError(f"--out: cannot write in {probe} (permission denied)")
 
 
@@ -90,6 +142,26 @@ def stored_seed(path: Path) -> int | None:
     with h5py.File(path, "r", swmr=True) as f:
         v = f.attrs.get("seed")
     return None if v is None else int(v)
+
+
+def stored_request(path: Path) -> tuple[ProtocolFile, BenchFile]:
+    """The protocol and the bench a run file was started with (``--resume RUN.h5`` alone),
+    parsed from the texts stored in it; :class:`StoreError` (one line) when they cannot be."""
+    from protocols.bench import parse_bench
+    from protocols.runfile import RunFileError, stored_texts
+
+    try:
+        protocol_yaml, bench_yaml = stored_texts(path)
+    except (OSError, RunFileError) as exc:
+        raise StoreError(f"--resume: {exc}") from None
+    if not protocol_yaml.strip():
+        raise StoreError(f"--resume: {path} holds no protocol; give the protocol file too")
+    try:
+        pf = parse_protocol(protocol_yaml, f"{path}:protocol_yaml")
+        bf = parse_bench(bench_yaml, f"{path}:bench_yaml")
+    except ConfigError as exc:
+        raise StoreError(f"--resume: the request stored in {path} is unreadable ({exc})") from None
+    return pf, bf
 
 
 def resume_run(

@@ -55,7 +55,8 @@ def test_existing_output_is_refused(proto_file, tmp_path, capsys, no_instruments
     out = tmp_path / "run.h5"
     out.write_bytes(b"x")
     err = _main_err([str(proto_file), "--out", str(out)], capsys)
-    assert "exists already" in err and "--resume" in err
+    assert "exists already and is not a run file" in err and "--resume" not in err
+    assert f"--out {tmp_path / 'run_2.h5'}" in err
     assert out.read_bytes() == b"x" and not no_instruments
 
 
@@ -210,3 +211,94 @@ def test_lookup3_matches_hdf5_superblock_checksum(tmp_path: Path) -> None:
     assert lookup3(raw[:n]) == struct.unpack_from("<I", raw, n)[0]
     assert clear_consistency_flags(f) is False  # a cleanly closed file has no flags set
     assert f.read_bytes() == raw
+
+
+def test_resume_alone_takes_protocol_and_bench_from_the_file(
+    proto_file, tmp_path, capsys, monkeypatch
+) -> None:
+    """``run_protocol --resume RUN.h5`` (no protocol argument) continues a killed run."""
+    killed = tmp_path / "killed.h5"
+    proc = _spawn([str(proto_file), "--out", str(killed), "--seed", "3"])
+    _wait_done(killed, 2, proc)
+    proc.kill()
+    proc.wait(10)
+    proto_file.unlink()  # the protocol file is gone: the run file holds it
+    monkeypatch.setattr(
+        daq.bench_assembly,
+        "assemble",
+        lambda bf, seed=None, **k: fake_bench(FakeWorld(seed=seed or 0)),
+    )
+    assert rp.main(["--resume", str(killed), "--dry-run"]) == 0
+    assert "'fake_scan'" in capsys.readouterr().out
+    assert rp.main(["--resume", str(killed)]) == 0
+    out = capsys.readouterr().out
+    assert "complete: 12 points" in out
+    run = read_run(killed)
+    assert run.status == "complete"
+    assert all(np.all(s.done == PointState.DONE) for s in run.scans.values())
+
+
+def test_no_protocol_and_no_resume_is_one_line(tmp_path, capsys, no_instruments) -> None:
+    err = _main_err([], capsys)
+    assert "give a protocol" in err and "--resume RUN.h5" in err and "smoke" in err
+
+
+def test_resume_alone_of_a_file_that_is_not_a_run(tmp_path, capsys, no_instruments) -> None:
+    bogus = tmp_path / "bogus.h5"
+    h5py.File(bogus, "w").close()
+    err = _main_err(["--resume", str(bogus)], capsys)
+    assert err.startswith("run_protocol: error: --resume:") and "not a biafc run file" in err
+
+
+def _finished_run(path: Path, status: str) -> None:
+    from protocols.runfile import FORMAT
+
+    with h5py.File(path, "w") as f:
+        f.attrs["format"] = FORMAT
+        f.attrs["format_version"] = 1
+        f.attrs["status"] = status
+
+
+def test_out_of_a_complete_run_suggests_a_free_name(
+    proto_file, tmp_path, capsys, no_instruments
+) -> None:
+    out = tmp_path / "run.h5"
+    _finished_run(out, "complete")
+    (tmp_path / "run_2.h5").write_bytes(b"")
+    err = _main_err([str(proto_file), "--out", str(out)], capsys)
+    assert "is a complete run already" in err
+    assert f"--out {tmp_path / 'run_3.h5'}" in err and "--resume" not in err
+
+
+def test_out_of_an_interrupted_run_suggests_resume(
+    proto_file, tmp_path, capsys, no_instruments
+) -> None:
+    out = tmp_path / "run.h5"
+    _finished_run(out, "aborted")
+    err = _main_err([str(proto_file), "--out", str(out)], capsys)
+    assert f"continue it with --resume {out}" in err and "left aborted" in err
+
+
+def test_resume_of_a_complete_run_is_refused_before_connecting(
+    proto_file, tmp_path, capsys, no_instruments
+) -> None:
+    out = tmp_path / "run.h5"
+    _finished_run(out, "complete")
+    err = _main_err([str(proto_file), "--resume", str(out)], capsys)
+    assert "complete already, nothing to continue" in err and "--out" in err
+    assert "unexpected" not in err and not no_instruments
+
+
+def test_out_folder_takes_the_protocols_file_name(proto_file, tmp_path, capsys) -> None:
+    folder = tmp_path / "runs"
+    folder.mkdir()
+    assert rp.main([str(proto_file), "--out", str(folder), "--dry-run"]) == 0
+    out = capsys.readouterr().out
+    assert f"output {folder}/fake_scan_" in out and out.strip().endswith(".h5")
+
+
+def test_out_under_a_file_names_it(proto_file, tmp_path, capsys, no_instruments) -> None:
+    blocker = tmp_path / "blocker"
+    blocker.write_text("")
+    err = _main_err([str(proto_file), "--out", str(blocker / "run.h5")], capsys)
+    assert f"{blocker} is a file, not a folder" in err
