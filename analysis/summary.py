@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from analysis.display import amplitude_label
-from analysis.sweep import AmplitudeSweep, amplitude_sweep
+from analysis.sweep import AmplitudeSweep, amplitude_sweep, output_peak_definition
 from protocols.runfile import RunData
 
 __all__ = [
@@ -96,21 +96,25 @@ def summary_rows(sweep: AmplitudeSweep) -> list[dict[str, Any]]:
 
 
 def summarize(run: RunData) -> dict[str, Any]:
-    """Summary of a run: ``{"file", "status", "backend", "far_cylinder", "rows": [...]}``.
+    """Summary of a run: ``{"file", "status", "backend", "far_cylinder", "output_peak",
+    "rows": [...]}``; ``output_peak`` says per direction what ``output_Hz`` (f_out) is.
 
     ``rows`` holds one dict per direction and amplitude (see :func:`summary_rows`).
     """
     rows: list[dict[str, Any]] = []
     far: dict[str, int] = {}
+    peak: dict[str, str] = {}
     for direction, scan in run.scans.items():
         sweep = amplitude_sweep(scan, run.chain)
         far[direction] = sweep.far
+        peak[direction] = output_peak_definition(sweep)
         rows.extend(summary_rows(sweep))
     return {
         "file": str(run.path),
         "status": run.status,
         "backend": run.backend,
         "far_cylinder": far,
+        "output_peak": peak,
         "rows": rows,
     }
 
@@ -134,6 +138,11 @@ def format_summary(summary: dict[str, Any]) -> str:
             f"{r['direction']:4} {amp:>12} {khz(r['input_Hz']):>9} {khz(r['output_Hz']):>9} "
             f"{khz(r['detuning_Hz']):>10} {khz(r['expected_output_Hz']):>10} {tr:>10} {gain:>7}  "
             f"{r['conversion']}"
+        )
+    for direction, text in summary.get("output_peak", {}).items():
+        lines.append(
+            f"f_out: {text.replace('far-end output peak f_out', 'far-end output peak')}"
+            + (f" [{direction}]" if len(summary["output_peak"]) > 1 else "")
         )
     return "\n".join(lines)
 

@@ -39,6 +39,7 @@ __all__ = [
     "amplitude_sweep",
     "cylinder_index",
     "input_frequency_Hz",
+    "output_peak_definition",
     "transmission_gain",
 ]
 
@@ -124,6 +125,17 @@ def amplitude_sweep(scan: ScanData, chain: ChainInfo) -> AmplitudeSweep:
         transmission_gain=transmission_gain(scan.amplitudes, transmission),
         expected_Hz=expected_output_Hz(scan.f_center_Hz, scan.direction, onset, cutoff),
         f_range_Hz=f_range,
+    )
+
+
+def output_peak_definition(sweep: AmplitudeSweep) -> str:
+    """What ``output_Hz`` (``f_out``) is, in words: the one definition of the far-end peak that
+    every command prints (``biafc simulate``, ``biafc figures``)."""
+    lo, hi = sweep.f_range_Hz
+    return (
+        f"far-end output peak f_out (largest line of cylinder {sweep.far}'s velocity spectrum "
+        f"in {lo / 1e3:.2f}-{hi / 1e3:.2f} kHz, the bands' neighbourhood without the contacts' "
+        "low-frequency drift and the harmonics)"
     )
 
 

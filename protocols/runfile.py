@@ -21,8 +21,10 @@ and nowhere else. Layout (see the design notes)::
     /log              (time, level, message) rows, resizable
     /simulation       (optional) attrs of the DEM behind the data: integrator, order, dt_s (s),
                       error_estimate_rel (step-doubling estimate of the velocity error, relative
-                      L2, worst cylinder; worst run), energy_residual_rel (energy balance
-                      residual over the input work; largest magnitude), and for the simulated
+                      L2, worst cylinder; worst run), work_not_in_chain_rel (the fraction
+                      of the actuator's input work no longer in the chain at the end:
+                      dissipated by the damping, plus the integrator's energy error, which
+                      is all of it on an undamped chain; largest magnitude), and for the simulated
                       bench dem_runs_json: a JSON list with one entry per DEM run (direction,
                       kind, amplitude and its units, the same indicators). ``biafc simulate``
                       writes them at creation; the run engine when the file closes.

@@ -21,7 +21,6 @@ from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
-from numpy.typing import NDArray
 
 from daq.cli.biafc import CliError
 from instruments.units import UnitError, parse_quantity
@@ -87,18 +86,6 @@ def parse_amplitude(text: str) -> tuple[Literal["displacement", "force"], float]
             raise CliError("--amplitude: must be > 0")
         return kind, value
     raise CliError(f"--amplitude: {text!r} needs a length (e.g. '2 um') or a force (e.g. '12 N')")
-
-
-def peak_frequency_Hz(
-    v: NDArray[np.float64], rate_Hz: float, f_min_Hz: float = 1e3, f_max_Hz: float = math.inf
-) -> float:
-    """Frequency (Hz) of the largest Hann-windowed spectral line of ``v`` (sampled at
-    ``rate_Hz``) within ``[f_min_Hz, f_max_Hz]``."""
-    n = v.size
-    spec = np.abs(np.fft.rfft(v * np.hanning(n), n=4 * n))
-    f = np.fft.rfftfreq(4 * n, 1.0 / rate_Hz)
-    spec[(f < f_min_Hz) | (f > f_max_Hz)] = 0.0
-    return float(f[int(np.argmax(spec))])
 
 
 def run(args: argparse.Namespace) -> int:
@@ -172,18 +159,13 @@ def run(args: argparse.Namespace) -> int:
     except BaseException:
         writer.close("failed")
         raise
-    entry, far = (0, -1) if args.direction == "ltr" else (-1, 0)
-    v = res.velocity[0]
-    e_entry = float(np.sum(v[entry] ** 2))
-    e_far = float(np.sum(v[far] ** 2))
-    ratio = e_far / e_entry if e_entry > 0 else float("nan")
-    f_peak = peak_frequency_Hz(v[far], rate)
-    if bands.n_bands >= 2:
-        lo, hi = float(bands.onset_Hz[:, 1].min()), float(bands.cutoff_Hz[:, 1].max())
-        f_band = peak_frequency_Hz(v[far], rate, lo, hi)
-    far_no = int(res.cylinders[far])
+    from analysis.sweep import amplitude_sweep, output_peak_definition
+    from protocols.runfile import read_run
+
+    stored = read_run(args.out)
+    sweep = amplitude_sweep(stored.scans[args.direction], stored.chain)
     step = "" if simulation["order"] == 0 else f" dt = {simulation['dt_s'] * 1e6:.3g} us"
-    residual = "energy residual" if not chain.damped else "energy lost (damped chain)"
+    lost = "dissipated by the damping" if chain.damped else "the integrator's energy error"
     print(
         f"{args.out}: {args.direction} {kind} {amplitude:g} {drive.units} at "
         f"{burst.f_center_Hz / 1e3:g} kHz, {chain.n} cylinders, {res.time_s.size} samples, "
@@ -191,16 +173,18 @@ def run(args: argparse.Namespace) -> int:
     )
     print(
         f"error estimate (worst cylinder, relative L2): {simulation['error_estimate_rel']:.2g} "
-        f"[{simulation['error_estimate_method']}]; {residual} "
-        f"{abs(simulation['energy_residual_rel']):.2g} of the input work"
+        f"[{simulation['error_estimate_method']}]; input work not in the chain at the end "
+        f"{simulation['work_not_in_chain_rel']:.2g} ({lost})"
     )
-    print(f"transmitted energy ratio (cylinder {far_no} / entry): {ratio:.4g}")
-    print(f"far-end (cylinder {far_no}) spectral peak: {f_peak / 1e3:.3f} kHz")
-    if bands.n_bands >= 2:
-        print(
-            f"far-end spectral peak in the first local-resonance band "
-            f"[{lo / 1e3:.2f}, {hi / 1e3:.2f}] kHz: {f_band / 1e3:.3f} kHz"
-        )
+    print(
+        f"transmitted energy ratio E_far/E_in (cylinder {sweep.far} / cylinder {sweep.entry}): "
+        f"{float(sweep.transmission[0]):.4g}"
+    )
+    print(
+        f"{output_peak_definition(sweep)}: {float(sweep.output_Hz[0]) / 1e3:.3f} kHz "
+        f"(input {float(sweep.input_Hz[0]) / 1e3:.3f} kHz, detuning "
+        f"{float(sweep.detuning_Hz[0]) / 1e3:+.3f} kHz)"
+    )
     return 0
 
 
@@ -225,7 +209,7 @@ def _run_full(
         "integrator": meta["integrator"],
         "order": int(meta["order"]),
         "dt_s": float(meta["dt_s"]),
-        "energy_residual_rel": float(meta["energy_residual_rel"][0]),
+        "work_not_in_chain_rel": float(meta["work_not_in_chain_rel"][0]),
         "error_estimate_rel": float(meta.get("error_estimate_rel", [float("nan")])[0]),
         "error_estimate_method": str(meta.get("error_estimate_method", "none (not requested)")),
         "input_work_J": float(meta["input_work_J"][0]),
@@ -259,12 +243,13 @@ def _run_lean(chain: Any, drive: Any, duration: float, rate: float) -> tuple[Any
         estimate = max(bounds, default=float("nan"))
         method = "largest error bound of the scene plan's reductions"
         integrator, order = str(meta["integrator"]), int(dem.INTEGRATORS[meta["integrator"]][0])
-        dt_s, residual = float(meta["dt_s"]), float(np.asarray(meta["energy_residual_rel"])[0])
+        dt_s = float(meta["dt_s"])
+        residual = float(np.asarray(meta["work_not_in_chain_rel"])[0])
     return res, {
         "integrator": integrator,
         "order": order,
         "dt_s": dt_s,  # the linear solution: the record's sample period
-        "energy_residual_rel": residual,
+        "work_not_in_chain_rel": residual,
         "error_estimate_rel": estimate,
         "error_estimate_method": method,
         "damped": chain.damped,

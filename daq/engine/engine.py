@@ -445,14 +445,14 @@ class RunEngine:
         if not runs:
             return None
         err = [float(r.get("error_estimate_rel", np.nan)) for r in runs]
-        res = [float(r.get("energy_residual_rel", np.nan)) for r in runs]
+        res = [float(r.get("work_not_in_chain_rel", np.nan)) for r in runs]
         finite = [x for x in res if np.isfinite(x)]
         return {
             "integrator": str(runs[0].get("integrator", "")),
             "order": int(runs[0].get("order", 0)),
             "dt_s": float(runs[0].get("dt_s", np.nan)),
             "error_estimate_rel": float(np.nanmax(err)) if np.isfinite(err).any() else np.nan,
-            "energy_residual_rel": max(finite, key=abs) if finite else float("nan"),
+            "work_not_in_chain_rel": max(finite, key=abs) if finite else float("nan"),
             "dem_runs": len(runs),
             "dem_runs_json": json.dumps(runs, default=float),
         }

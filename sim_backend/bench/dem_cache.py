@@ -49,7 +49,8 @@ class DemRecord:
     meta:
         How it was computed and how good it is: ``integrator``, ``order``, ``dt_s`` (s),
         ``error_estimate_rel`` (step-doubling estimate, relative L2 of the worst cylinder) and
-        ``energy_residual_rel`` (energy balance residual over the input work); empty when the
+        ``work_not_in_chain_rel`` (the fraction of the input work no longer in the chain at the
+        end: dissipated by the damping, plus the integrator's energy error); empty when the
         simulator does not say.
     """
 
@@ -120,7 +121,7 @@ class DemRunner:
 
     def take_served(self) -> list[dict[str, Any]]:
         """The meta of every distinct run served since the last call (direction, kind,
-        amplitude in m or N, integrator, order, dt_s, error_estimate_rel, energy_residual_rel),
+        amplitude in m or N, integrator, order, dt_s, error_estimate_rel, work_not_in_chain_rel),
         in the order first served; clears the list."""
         out = list(self._served.values())
         self._served.clear()
@@ -171,7 +172,7 @@ def dem_simulator(chain_spec: Any, integrator: str, dt_s: float | None) -> Simul
                 "order": int(res.meta["order"]),
                 "dt_s": float(res.meta["dt_s"]),
                 "error_estimate_rel": float(res.meta["error_estimate_rel"][0]),
-                "energy_residual_rel": float(res.meta["energy_residual_rel"][0]),
+                "work_not_in_chain_rel": float(res.meta["work_not_in_chain_rel"][0]),
             },
         )
 

@@ -375,7 +375,14 @@ def run_scene(plan: ScenePlan) -> SceneResult:
     )  # fmt: skip
     meta["solver"] = "nonlinear"
     meta.setdefault("fallback", False)
-    for key in ("integrator", "dt_s", "input_work_J", "energy_residual_rel", "finite"):
+    for key in (
+        "integrator",
+        "dt_s",
+        "input_work_J",
+        "energy_residual_rel",
+        "work_not_in_chain_rel",
+        "finite",
+    ):
         meta[key] = res.meta[key]
     if plan.stop_energy_fraction is not None:
         n_done = np.asarray(res.meta["samples_computed"])

@@ -353,6 +353,9 @@ def simulate(
         "input_work_J": work,
         "energy_gain_J": gain,
         "energy_residual_rel": (gain - work) / scale,
+        # what a run file stores (one name for damped and undamped chains): the input work not
+        # in the chain at the end, dissipated by damping plus the integrator's energy error
+        "work_not_in_chain_rel": (work - gain) / scale,
         "finite": bool(np.all(np.isfinite(vel))),
         "momentum_end_kg_m_s": np.where(flip, -energy[:, 5], energy[:, 5]),
         "wall_s": time.perf_counter() - t_wall,

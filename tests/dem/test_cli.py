@@ -40,7 +40,8 @@ def test_simulate_writes_a_run_file(tmp_path: Path, capsys: pytest.CaptureFixtur
             "--rate", "250 kS/s", "--out", str(out)]  # fmt: skip
     assert main(argv) == 0
     text = capsys.readouterr().out
-    assert "transmitted energy ratio" in text and "spectral peak" in text
+    assert "transmitted energy ratio" in text and "far-end output peak f_out" in text
+    assert text.count("peak") == 1  # one far-end peak, one definition
     run = read_run(out)
     assert run.status == "complete" and run.backend == "dem"
     scan = run.scans["rtl"]
@@ -84,3 +85,29 @@ def test_bands_check_against_continuum(capsys: pytest.CaptureFixture[str]) -> No
     assert len(lines) == 1
     cutoff_pct = float(lines[0].split("cutoff")[1].split("%")[0])
     assert 0 <= cutoff_pct < 1.0
+
+
+def test_far_end_peak_is_the_same_in_simulate_and_figures(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """One definition of the far-end peak: ``biafc simulate`` prints the value ``biafc figures``
+    puts in the summary (they printed 1.8 kHz and 7.9 kHz for one run), and names what it is;
+    the energy line says what it measures (work not in the chain, dissipated: not a residual)."""
+    import json
+    import re
+
+    out = tmp_path / "run.h5"
+    argv = ["simulate", "--direction", "ltr", "--amplitude", "4um", "--duration", "10 ms",
+            "--rate", "250 kS/s", "--out", str(out)]  # fmt: skip
+    assert main(argv) == 0
+    text = capsys.readouterr().out
+    m = re.search(r"far-end output peak f_out \(largest line of cylinder 31's velocity spectrum "
+                  r"in [0-9.]+-[0-9.]+ kHz.*\): ([0-9.]+) kHz", text)  # fmt: skip
+    assert m, text
+    assert "input work not in the chain at the end" in text and "dissipated" in text
+    assert "residual" not in text
+    assert main(["figures", str(out), "--out", str(tmp_path / "fig")]) == 0
+    figures_text = capsys.readouterr().out
+    assert "f_out: far-end output peak" in figures_text
+    row = json.loads((tmp_path / "fig" / "summary.json").read_text())["rows"][0]
+    assert float(m.group(1)) == pytest.approx(row["output_Hz"] / 1e3, abs=5e-4)

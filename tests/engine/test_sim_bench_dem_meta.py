@@ -31,7 +31,9 @@ def test_sim_bench_run_file_holds_dem_error_estimates(tmp_path: Path) -> None:
     assert sim["integrator"] == "blanes-moan4" and sim["order"] == 4
     assert 0 < sim["dt_s"] <= 2e-6
     assert 0 < sim["error_estimate_rel"] < 1e-3
-    assert abs(sim["energy_residual_rel"]) < 1.0
+    # the simulated bench's chain is damped: most of the input work is dissipated by the end
+    assert 0.5 < sim["work_not_in_chain_rel"] < 1.0
+    assert "energy_residual_rel" not in sim
     runs = json.loads(sim["dem_runs_json"])
     scan = run.scans["ltr"]
     assert len(runs) == sim["dem_runs"] == len(scan.amplitudes)
