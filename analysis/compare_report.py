@@ -1,0 +1,175 @@
+"""``biafc compare``'s work: predict a run, compare, write the figures and the table.
+
+:func:`compare_run` runs the model on what the run did (:mod:`analysis.model_run`), compares
+(:mod:`analysis.compare`) and writes into the output folder:
+
+* ``compare_spatial_<dir>_<k>.png/pdf``: measured and model spatial-frequency maps side by side
+  (one colour scale) at the smallest and the largest amplitude of each direction;
+* ``compare_spectra_<dir>``: the far cylinder's spectrum at every amplitude, measured and model;
+* ``compare_sweep``: transmission and far-end peak against amplitude, both directions;
+* ``compare_residuals``: the per-cylinder residuals; ``residuals.csv`` the table;
+* ``comparison.json``: figure of merit, counts, per-cylinder residuals and what was modelled.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+from analysis.bands import band_edges
+from analysis.compare import Comparison, compare_runs, format_table
+from analysis.model_run import (
+    RunSetup,
+    chain_spec_of_run,
+    predict,
+    predicted_run,
+    run_setup,
+)
+from analysis.spatial import spatial_frequency_map
+from protocols.runfile import RunData
+from sim_backend.dem import ChainSpec, build_chain
+
+__all__ = ["CompareReport", "compare_run"]
+
+
+@dataclass
+class CompareReport:
+    """What :func:`compare_run` did: the comparison, the setup, files written, model seconds."""
+
+    comparison: Comparison
+    setup: RunSetup
+    chain_spec: ChainSpec
+    predicted: RunData
+    model_s: float
+    files: dict[str, list[Path]] = field(default_factory=dict)
+    json_path: Path | None = None
+    csv_path: Path | None = None
+
+    def text(self) -> str:
+        s = self.setup
+        lines = []
+        if s.stroke_m_per_V is not None and s.amplifier_gain_V_per_V is not None:
+            lines.append(
+                f"drive: amplifier {s.amplifier_gain_V_per_V:g} V/V, piezo stroke "
+                f"{s.stroke_m_per_V * 1e6:.4g} um/V (bench: {s.bench_stroke_m_per_V * 1e6:.4g})"
+                if s.bench_stroke_m_per_V is not None
+                else ""
+            )
+        clip = s.clip_m_per_s
+        lines.append(
+            "vibrometer clips at "
+            + (f"{clip * 1e3:.4g} mm/s" if math.isfinite(clip) else "(unknown: not clipped)")
+        )
+        lines.append(
+            f"model: diameter {self.chain_spec.diameter * 1e3:.4g} mm, preload "
+            f"{self.chain_spec.preload:.4g} N, {self.model_s:.1f} s"
+        )
+        lines.append(format_table(self.comparison))
+        return "\n".join(x for x in lines if x)
+
+
+def compare_run(
+    run: RunData,
+    out_dir: str | Path | None,
+    *,
+    chain_spec: ChainSpec | None = None,
+    piezo_stroke_m_per_V: float | None = None,
+    solver: Literal["dem", "linear"] = "dem",
+) -> CompareReport:
+    """Predict ``run`` with ``chain_spec`` (default: the file's own chain, see
+    :func:`analysis.model_run.chain_spec_of_run`), compare, and write the figures into
+    ``out_dir`` (``None``: compute only)."""
+    spec = chain_spec if chain_spec is not None else chain_spec_of_run(run)
+    setup = run_setup(run, piezo_stroke_m_per_V)
+    n_run = len(run.chain.lengths_m)
+    chain = build_chain(spec)
+    if chain.n != n_run:
+        raise ValueError(f"the chain has {chain.n} cylinders but the run file's chain has {n_run}")
+    t0 = time.perf_counter()
+    prediction = predict(setup, chain, solver=solver)
+    model_s = time.perf_counter() - t0
+    pred = predicted_run(run, prediction)
+    cmp = compare_runs(run, pred, setup.clip_m_per_s)
+    report = CompareReport(cmp, setup, spec, pred, model_s)
+    if out_dir is not None:
+        _write(report, run, Path(out_dir))
+    return report
+
+
+def _write(report: CompareReport, run: RunData, out: Path) -> None:
+    from analysis.plots.compare_plot import (
+        plot_compare_residuals,
+        plot_compare_spatial,
+        plot_compare_spectra,
+        plot_compare_sweep,
+    )
+    from analysis.plots.style import amplitude_label, save_figure
+
+    out.mkdir(parents=True, exist_ok=True)
+    cmp, pred = report.comparison, report.predicted
+    onset, cutoff = band_edges(run.chain)
+    for d, dc in cmp.directions.items():
+        scan, pscan = run.scans[d], pred.scans[d]
+        f_range = dc.measured_sweep.f_range_Hz
+        rate = scan.sample_rate_Hz
+        amps = list(dict.fromkeys([0, len(scan.amplitudes) - 1]))
+        for k, a in enumerate(amps):
+            m = spatial_frequency_map(scan.velocity[a], scan.cylinders, rate, f_range)
+            p = spatial_frequency_map(pscan.velocity[a], scan.cylinders, rate, f_range)
+            label = amplitude_label(float(scan.amplitudes[a]), scan.amplitude_units)
+            fig = plot_compare_spatial(
+                m, p, dc.state[a], onset, cutoff, scan.f_center_Hz, f"{d.upper()} {label}"
+            )
+            name = f"compare_spatial_{d}_{'low' if k == 0 and len(amps) > 1 else 'high'}"
+            report.files[name] = save_figure(fig, out, name)
+        report.files[f"compare_spectra_{d}"] = save_figure(
+            plot_compare_spectra(dc), out, f"compare_spectra_{d}"
+        )
+    report.files["compare_sweep"] = save_figure(plot_compare_sweep(cmp), out, "compare_sweep")
+    report.files["compare_residuals"] = save_figure(
+        plot_compare_residuals(cmp), out, "compare_residuals"
+    )
+    report.csv_path = out / "residuals.csv"
+    with report.csv_path.open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["cylinder", "points", "spectral_residual", "time_residual", "noise_floor"])
+        for c, n, s, t, f in zip(
+            cmp.cylinders,
+            cmp.n_points,
+            cmp.spectral_residual,
+            cmp.time_residual,
+            cmp.noise_residual,
+            strict=True,
+        ):
+            w.writerow([int(c), int(n), _fmt(s), _fmt(t), _fmt(f)])
+    summary: dict[str, Any] = cmp.as_dict()
+    s = report.setup
+    summary["run_file"] = run.path.name
+    summary["model"] = {
+        "chain": report.chain_spec.model_dump(mode="json"),
+        "amplifier_gain_V_per_V": s.amplifier_gain_V_per_V,
+        "piezo_stroke_m_per_V": s.stroke_m_per_V,
+        "bench_piezo_stroke_m_per_V": s.bench_stroke_m_per_V,
+        "vibrometer_clip_m_per_s": s.clip_m_per_s if math.isfinite(s.clip_m_per_s) else None,
+        "model_s": report.model_s,
+    }
+    summary["points_per_direction"] = {
+        d: {
+            st: int(np.count_nonzero(dc.state == st))
+            for st in ("ok", "clipped", "failed", "pending")
+        }
+        for d, dc in cmp.directions.items()
+    }
+    report.json_path = out / "comparison.json"
+    report.json_path.write_text(json.dumps(summary, indent=2))
+
+
+def _fmt(x: float) -> str:
+    return f"{x:.6g}" if math.isfinite(x) else ""

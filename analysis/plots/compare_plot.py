@@ -1,0 +1,220 @@
+"""Measured and predicted side by side, on the same axes and colour scales (``biafc compare``)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.figure import Figure
+
+from analysis.compare import Comparison, DirectionComparison
+from analysis.plots.quasi_bands import DIRECTION_COLOURS
+from analysis.plots.style import (
+    add_gap_background,
+    amplitude_label,
+    amplitude_scale,
+    cell_edges,
+    masked_cmap,
+    new_figure,
+    style,
+)
+from analysis.spatial import SpatialFrequencyMap
+from analysis.spectra import spectrum_db
+
+__all__ = [
+    "plot_compare_residuals",
+    "plot_compare_spatial",
+    "plot_compare_spectra",
+    "plot_compare_sweep",
+]
+
+#: how each point state that is not compared is drawn
+BAD_MARK = {"failed": ("X", "red"), "clipped": ("^", "orange"), "pending": ("o", "grey")}
+
+
+def plot_compare_spatial(
+    measured: SpatialFrequencyMap,
+    predicted: SpatialFrequencyMap,
+    state: np.ndarray,
+    onset_Hz: np.ndarray,
+    cutoff_Hz: np.ndarray,
+    f_in_Hz: float,
+    title: str,
+) -> Figure:
+    """Two spatial-frequency maps (|V| in dB re the measured map's maximum, one colour scale),
+    measured left and predicted right; cylinders whose point is failed, clipped or not measured
+    are marked along the bottom (``state [C]``)."""
+    finite = measured.magnitude[np.isfinite(measured.magnitude)]
+    ref = float(finite.max()) if finite.size and finite.max() > 0 else None
+    if ref is None:
+        pf = predicted.magnitude[np.isfinite(predicted.magnitude)]
+        ref = float(pf.max()) if pf.size and pf.max() > 0 else 1.0
+    with style():
+        fig, axs = new_figure(1, 2, figsize=(11.0, 4.6), sharey=True, sharex=True)
+        mesh = None
+        for ax, smap, name in ((axs[0, 0], measured, "measured"), (axs[0, 1], predicted, "model")):
+            add_gap_background(ax)
+            f_khz = smap.freq_Hz / 1e3
+            mesh = ax.pcolormesh(
+                cell_edges(smap.cylinders),
+                cell_edges(f_khz),
+                spectrum_db(smap.magnitude, ref).T,
+                cmap=masked_cmap("magma"),
+                vmin=-40,
+                vmax=0,
+                shading="flat",
+                rasterized=True,
+            )
+            xs = np.arange(1, len(onset_Hz) + 1)
+            ax.plot(xs, onset_Hz / 1e3, ":", color="lime", lw=1.2, label="local band edges")
+            ax.plot(xs, cutoff_Hz / 1e3, ":", color="lime", lw=1.2)
+            ax.axhline(f_in_Hz / 1e3, color="white", ls="--", lw=0.8)
+            for st, (marker, colour) in BAD_MARK.items():
+                sel = state == st
+                if np.any(sel):
+                    ax.plot(
+                        smap.cylinders[sel],
+                        np.full(int(sel.sum()), f_khz[0] + 0.03 * (f_khz[-1] - f_khz[0])),
+                        marker,
+                        color=colour,
+                        ms=7,
+                        ls="none",
+                        label=st,
+                    )
+            ax.set_ylim(f_khz[0], f_khz[-1])
+            ax.set_xlabel("cylinder number")
+            ax.set_title(f"{name}: {title}")
+        axs[0, 0].set_ylabel("frequency (kHz)")
+        axs[0, 0].legend(loc="upper right", fontsize=8, framealpha=0.85)
+        assert mesh is not None
+        fig.colorbar(mesh, ax=list(axs[0]), label="|V| (dB re measured max)")
+    return fig
+
+
+def plot_compare_spectra(dc: DirectionComparison) -> Figure:
+    """Far-cylinder spectra at every amplitude: measured (solid) and model (dashed) on the same
+    axes, one panel per amplitude; panels of failed, clipped or unmeasured points say so."""
+    ms, ps = dc.measured_sweep, dc.predicted_sweep
+    n = len(ms.amplitudes)
+    cols = min(4, n)
+    rows = math.ceil(n / cols)
+    colour = DIRECTION_COLOURS.get(dc.direction, "k")
+    far_state = dc.state_of(ms.far)
+    with style():
+        fig, axs = new_figure(rows, cols, figsize=(3.2 * cols, 2.6 * rows))
+        for a in range(rows * cols):
+            ax: Axes = axs[a // cols, a % cols]
+            if a >= n:
+                ax.set_visible(False)
+                continue
+            f = ms.freq_Hz / 1e3
+            if np.all(np.isfinite(ms.magnitude[a])):
+                ax.plot(f, ms.magnitude[a] * 1e6, color=colour, lw=1.2, label="measured")
+            else:
+                add_gap_background(ax)
+            ax.plot(f, ps.magnitude[a] * 1e6, "--", color="k", lw=1.0, label="model")
+            ax.axvline(ms.expected_Hz / 1e3, color=colour, ls=":", lw=1)
+            label = amplitude_label(float(ms.amplitudes[a]), ms.amplitude_units)
+            st = str(far_state[a])
+            ax.set_title(f"{label}" + ("" if st == "ok" else f" ({st})"), fontsize=9)
+            if a // cols == rows - 1:
+                ax.set_xlabel("frequency (kHz)")
+            if a % cols == 0:
+                ax.set_ylabel(f"|V| #{ms.far} (um)")
+        axs[0, 0].legend(fontsize=8)
+        fig.suptitle(f"{dc.direction.upper()}: far cylinder #{ms.far}, measured and model")
+    return fig
+
+
+def plot_compare_sweep(cmp: Comparison) -> Figure:
+    """Energy transmission (far / entry cylinder) and the far cylinder's spectral peak against
+    amplitude, both directions: measured markers, model lines; amplitudes whose entry or far
+    point is failed, clipped or not measured get the state's marker instead."""
+    with style():
+        fig, axs = new_figure(1, 2, figsize=(11.0, 4.2))
+        ax_t, ax_f = axs[0, 0], axs[0, 1]
+        for d, dc in cmp.directions.items():
+            ms, ps = dc.measured_sweep, dc.predicted_sweep
+            colour = DIRECTION_COLOURS.get(d, "k")
+            factor, unit = amplitude_scale(ms.amplitudes, ms.amplitude_units)
+            x = ms.amplitudes / factor
+            st = dc.sweep_state()
+            good = st == "ok"
+            ax_t.plot(x, ps.transmission, "-", color=colour, lw=1.2, label=f"{d.upper()} model")
+            ax_t.plot(
+                x[good], ms.transmission[good], "o", color=colour, label=f"{d.upper()} measured"
+            )
+            ax_f.plot(x, ps.output_Hz / 1e3, "-", color=colour, lw=1.2, label=f"{d.upper()} model")
+            ax_f.plot(
+                x[good], ms.output_Hz[good] / 1e3, "o", color=colour, label=f"{d.upper()} measured"
+            )
+            for name, (marker, mc) in BAD_MARK.items():
+                sel = st == name
+                if np.any(sel):
+                    yt = np.where(np.isfinite(ms.transmission[sel]), ms.transmission[sel], np.nan)
+                    yt = np.where(np.isfinite(yt), yt, ps.transmission[sel])
+                    ax_t.plot(x[sel], yt, marker, color=mc, ms=8, ls="none", label=name)
+                    yf = np.where(
+                        np.isfinite(ms.output_Hz[sel]), ms.output_Hz[sel], ps.output_Hz[sel]
+                    )
+                    ax_f.plot(x[sel], yf / 1e3, marker, color=mc, ms=8, ls="none", label=name)
+            ax_f.axhline(ms.expected_Hz / 1e3, color=colour, ls=":", lw=1)
+            ax_t.set_xlabel(f"amplitude ({unit})")
+            ax_f.set_xlabel(f"amplitude ({unit})")
+        xs_all = np.concatenate(
+            [
+                dc.measured_sweep.amplitudes
+                / amplitude_scale(dc.measured_sweep.amplitudes, dc.measured_sweep.amplitude_units)[
+                    0
+                ]
+                for dc in cmp.directions.values()
+            ]
+        )
+        for ax in (ax_t, ax_f):
+            if xs_all.size and np.all(xs_all > 0):
+                ax.set_xscale("log")
+                ax.set_xlim(xs_all.min() / 1.3, xs_all.max() * 1.3)
+            handles, labels = ax.get_legend_handles_labels()
+            uniq = dict(zip(labels, handles, strict=True))
+            ax.legend(uniq.values(), uniq.keys(), fontsize=8)
+        ys = [
+            y
+            for dc in cmp.directions.values()
+            for y in (dc.measured_sweep.transmission, dc.predicted_sweep.transmission)
+        ]
+        pos = np.concatenate([y[np.isfinite(y) & (y > 0)] for y in ys])
+        if pos.size:
+            ax_t.set_yscale("log")
+            ax_t.set_ylim(pos.min() / 2.0, pos.max() * 2.0)
+        else:
+            ax_t.text(
+                0.5, 0.5, "entry or far cylinder not scanned", ha="center", transform=ax_t.transAxes
+            )
+        ax_t.set_ylabel("energy transmission E_far / E_entry")
+        ax_f.set_ylabel("far-cylinder peak (kHz)")
+        ax_t.set_title("transmission against amplitude")
+        ax_f.set_title("far-end peak against amplitude (dotted: band edge)")
+    return fig
+
+
+def plot_compare_residuals(cmp: Comparison) -> Figure:
+    """Per-cylinder residuals (spectral and time-domain RMS over the compared points)."""
+    with style():
+        fig, axs = new_figure(1, 1, figsize=(9.0, 3.6))
+        ax = axs[0, 0]
+        x = cmp.cylinders.astype(float)
+        ax.bar(x - 0.2, cmp.spectral_residual, width=0.4, label="spectral", color="tab:blue")
+        ax.bar(x + 0.2, cmp.time_residual, width=0.4, label="time domain", color="tab:grey")
+        if np.any(np.isfinite(cmp.noise_residual)):
+            ax.plot(x, cmp.noise_residual, "k_", ms=10, mew=2, label="noise floor")
+        ax.axhline(1.0, color="k", ls=":", lw=1, label="predicting nothing")
+        ax.set_xlabel("cylinder number")
+        ax.set_ylabel("relative residual (RMS)")
+        fom = cmp.figure_of_merit
+        ax.set_title(
+            "residual per cylinder; figure of merit "
+            + (f"{fom:.3f}" if math.isfinite(fom) else "n/a")
+        )
+        ax.legend(fontsize=8)
+    return fig

@@ -1,0 +1,89 @@
+"""``biafc compare RUN.h5 [--chain CHAIN.yaml] [--piezo-stroke 0.04um/V] [--out DIR]``.
+
+Runs the model on exactly what the run did (bursts, amplitudes through the bench's amplifier
+gain and piezo stroke, cylinders, directions, record length, sample rate, vibrometer range:
+:mod:`analysis.model_run`), prints the per-cylinder residual table and the figure of merit, and
+writes the measured and predicted figures side by side into DIR (default ``<RUN>_compare``
+beside the run file). Without ``--chain`` the model is the chain recorded in the file's
+``/chain`` (lengths, diameter, preload; the rest from the default chain). ``--piezo-stroke``
+replaces the bench's stroke (e.g. the one ``biafc calibrate`` fitted). ``--linear`` uses the
+linear-response solver instead of the DEM (fast; right only at small amplitude).
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from daq.cli.biafc import CliError
+
+__all__ = ["add_arguments", "parse_stroke", "run"]
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("run_file", type=Path, help="run file (HDF5), measured or simulated")
+    parser.add_argument("--chain", type=Path, help="chain file (YAML); default: the file's chain")
+    parser.add_argument(
+        "--piezo-stroke",
+        help="piezo stroke per volt with unit (e.g. '0.04 um/V'); default: the bench's",
+    )
+    parser.add_argument("--out", type=Path, help="folder for the figures and the table")
+    parser.add_argument(
+        "--linear", action="store_true", help="linear-response model instead of the DEM"
+    )
+
+
+def parse_stroke(text: str) -> float:
+    """``'0.04 um/V'`` -> 4e-8 (m/V); raises :class:`CliError`."""
+    from instruments.units import UnitError, parse_quantity
+
+    t = text.strip()
+    if not t.endswith("/V"):
+        raise CliError(f"--piezo-stroke {text!r}: write it per volt, e.g. '0.04 um/V'")
+    try:
+        value = parse_quantity(t[:-2].strip(), "length", field="--piezo-stroke")
+    except UnitError as exc:
+        raise CliError(str(exc)) from None
+    if not value > 0:
+        raise CliError(f"--piezo-stroke {text!r}: must be > 0")
+    return value
+
+
+def run(args: argparse.Namespace) -> int:
+    from analysis.compare_report import compare_run
+    from protocols.runfile import RunFileError, read_run
+    from sim_backend.dem import ChainFileError, load_chain_spec
+
+    path: Path = args.run_file
+    if not path.exists():
+        raise CliError(f"run file {path} does not exist")
+    try:
+        data = read_run(path)
+    except (RunFileError, OSError, KeyError) as exc:
+        raise CliError(f"{path}: cannot read as a run file ({exc})") from exc
+    if not data.scans:
+        raise CliError(f"{path}: the run file holds no scan")
+    spec = None
+    if args.chain is not None:
+        try:
+            spec = load_chain_spec(args.chain)
+        except ChainFileError as exc:
+            raise CliError(str(exc)) from None
+    stroke = parse_stroke(args.piezo_stroke) if args.piezo_stroke else None
+    out = args.out or path.with_name(f"{path.stem}_compare")
+    try:
+        report = compare_run(
+            data,
+            out,
+            chain_spec=spec,
+            piezo_stroke_m_per_V=stroke,
+            solver="linear" if args.linear else "dem",
+        )
+    except ValueError as exc:
+        raise CliError(f"{path}: {exc}") from exc
+    print(report.text())
+    for name, paths in report.files.items():
+        print(f"written {name}: {', '.join(str(p) for p in paths)}")
+    print(f"written {report.csv_path}")
+    print(f"written {report.json_path}")
+    return 0

@@ -1,0 +1,108 @@
+"""``biafc compare``: the model on what a run did, residuals, marked points, figures."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from analysis.compare import point_states
+from analysis.compare_report import compare_run
+from analysis.model_run import run_setup
+from analysis.synthetic_scan import write_synthetic_scan
+from daq.cli.biafc import main as biafc
+from protocols.runfile import PointState, read_run
+from sim_backend.dem import default_chain_spec
+
+CYL = (1, 9, 16, 23, 31)
+
+
+@pytest.fixture(scope="module")
+def scan(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A small scan of the default chain (what the file says), one point failed."""
+    path = tmp_path_factory.mktemp("cmp") / "scan.h5"
+    return write_synthetic_scan(
+        path,
+        true_spec=default_chain_spec(),
+        amplitudes_m=(20e-9, 2e-6),
+        cylinders=CYL,
+        duration_s=8e-3,
+        failed=[("ltr", 1, 2)],
+    )
+
+
+def test_setup_reads_drive_through_bench_gain_and_stroke(scan: Path) -> None:
+    run = read_run(scan)
+    s = run_setup(run)
+    assert s.amplifier_gain_V_per_V == 20.0 and s.bench_stroke_m_per_V == pytest.approx(5e-8)
+    assert np.allclose(s.directions["ltr"].drive_SI, [20e-9, 2e-6])
+    assert s.clip_m_per_s == pytest.approx(0.5)  # 50 mm/s/V x 10 V
+    fitted = run_setup(run, piezo_stroke_m_per_V=4e-8)
+    assert np.allclose(fitted.directions["rtl"].drive_SI, [16e-9, 1.6e-6])
+    assert s.directions["ltr"].burst.f_center_Hz == 8920.0
+    assert list(s.directions["ltr"].cylinders) == list(CYL)
+
+
+def test_generator_volts_reach_the_chain_through_gain_and_stroke(scan: Path) -> None:
+    run = read_run(scan)
+    run.scans["ltr"].amplitude_units = "V"
+    run.scans["ltr"].amplitudes = np.array([0.04, 4.0])  # Vpp at the generator
+    s = run_setup(run)
+    # 0.5 * Vpp * 20 V/V * 0.05 um/V
+    assert np.allclose(s.directions["ltr"].drive_SI, [20e-9, 2e-6])
+
+
+def test_true_model_sits_at_the_noise_floor_and_a_wrong_one_does_not(scan: Path) -> None:
+    run = read_run(scan)
+    good = compare_run(run, None).comparison
+    assert good.counts == {"ok": 19, "pending": 0, "failed": 1, "clipped": 0}
+    assert good.directions["ltr"].state[1, 2] == "failed"
+    assert np.isnan(good.directions["ltr"].spectral_residual[1, 2])
+    # the true model: its residual is what the noise and the trigger jitter explain
+    assert good.figure_of_merit < 0.15
+    assert good.time_figure < 1.5 * good.noise_figure + 0.05
+    wrong = default_chain_spec().model_copy(update={"diameter": 14.4e-3})
+    bad = compare_run(run, None, chain_spec=wrong).comparison
+    assert bad.figure_of_merit > 3 * good.figure_of_merit
+    too_strong = compare_run(run, None, piezo_stroke_m_per_V=7e-8).comparison
+    assert too_strong.figure_of_merit > 2 * good.figure_of_merit
+
+
+def test_clipped_and_failed_points_are_marked_not_compared() -> None:
+    done = np.array([[PointState.DONE, PointState.FAILED, PointState.DONE, PointState.PENDING]])
+    v = np.zeros((1, 4, 16))
+    v[0, 2, 5] = 0.4999  # reaches the clip level
+    v[0, 3] = np.nan
+    assert list(point_states(done, v, 0.5)[0]) == ["ok", "failed", "clipped", "pending"]
+    assert list(point_states(done, v, np.inf)[0]) == ["ok", "failed", "ok", "pending"]
+
+
+def test_cli_writes_side_by_side_figures_and_table(
+    scan: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "cmp"
+    assert biafc(["compare", str(scan), "--out", str(out), "--linear"]) == 0
+    text = capsys.readouterr().out
+    assert "figure of merit" in text and "1 failed" in text
+    for name in ("compare_spatial_ltr_low", "compare_spatial_rtl_high", "compare_spectra_ltr",
+                 "compare_sweep", "compare_residuals"):  # fmt: skip
+        assert (out / f"{name}.png").stat().st_size > 10_000
+    summary = json.loads((out / "comparison.json").read_text())
+    assert summary["points"]["failed"] == 1
+    assert len(summary["cylinders"]) == len(CYL)
+    rows = (out / "residuals.csv").read_text().splitlines()
+    assert rows[0].startswith("cylinder,points,spectral_residual") and len(rows) == 1 + len(CYL)
+
+
+def test_cli_refuses_a_bad_chain_file_in_one_line(
+    scan: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("diameter: -3 mm\nn_cylinders: 31\nlength_first: 90 mm\nlength_last: 110 mm\n")
+    assert biafc(["compare", str(scan), "--chain", str(bad)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "diameter" in err and len(err.splitlines()) == 1
+    assert biafc(["compare", str(scan), "--piezo-stroke", "0.04 um"]) == 2
+    assert "per volt" in capsys.readouterr().err
