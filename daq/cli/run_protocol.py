@@ -24,6 +24,7 @@ from __future__ import annotations
 import argparse
 import signal
 import sys
+import threading
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -201,7 +202,70 @@ def run(args: argparse.Namespace) -> int:
 
 
 class _Interrupted(KeyboardInterrupt):
-    """Ctrl-C/SIGTERM before the engine runs, or a second one during the run."""
+    """Ctrl-C/SIGTERM before the engine runs, or a second one (or the watchdog) during it."""
+
+
+#: after the first Ctrl-C, the run has this long to reach its safe state by itself (a point in
+#: flight, homing, a DEM being compiled); then it is interrupted where it is, and the safe
+#: state follows at once
+ABORT_BOUND_S = 5.0
+
+
+class _SignalGate:
+    """SIGINT/SIGTERM from the first moment of ``main``: before the engine exists a signal
+    stops at once (nothing was switched on); during the run the first asks the engine to abort
+    and starts a watchdog of :data:`ABORT_BOUND_S`; a second one, or the watchdog, interrupts
+    whatever runs. Never while the safe state is being set and the file closed."""
+
+    def __init__(self) -> None:
+        self.engine: Any = None
+        self.interrupted: list[str] = []
+        self._watchdog: threading.Timer | None = None
+        self._forced = False
+        self._old: dict[int, Any] = {}
+
+    def install(self) -> _SignalGate:
+        self._old = {s: signal.signal(s, self) for s in (signal.SIGINT, signal.SIGTERM)}
+        return self
+
+    def restore(self) -> None:
+        if self._watchdog is not None:
+            self._watchdog.cancel()
+        for s, h in self._old.items():
+            signal.signal(s, h)
+        self._old = {}
+
+    def _force(self) -> None:
+        self._forced = True
+        main = threading.main_thread().ident
+        if main is not None:  # a real signal: it also breaks a blocking wait of the main thread
+            signal.pthread_kill(main, signal.SIGINT)
+
+    def __call__(self, signum: int, frame: FrameType | None) -> None:
+        name = signal.Signals(signum).name
+        if self._forced:
+            self._forced = False
+            name = self.interrupted[0] if self.interrupted else name
+        else:
+            self.interrupted.append(name)
+        engine = self.engine
+        if engine is not None and engine.ending:
+            return  # the safe state is being set and the file closed: never interrupt that
+        if engine is None or len(self.interrupted) > 1 or self._watchdog is not None:
+            raise _Interrupted(name)  # nothing driven yet, asked twice, or too slow: stop now
+        engine.abort(f"interrupted by {name}")
+        self._watchdog = threading.Timer(ABORT_BOUND_S, self._force)
+        self._watchdog.daemon = True
+        self._watchdog.start()
+        print(
+            f"run_protocol: {name}: aborting, safe state follows within {ABORT_BOUND_S:g} s "
+            "(Ctrl-C again to hurry)",
+            file=sys.stderr,
+            flush=True,
+        )
+
+
+_GATE: _SignalGate | None = None
 
 
 def _execute(
@@ -215,28 +279,10 @@ def _execute(
 ) -> int:
     from daq.engine.outcome import ExitCode, exit_code, final_line
 
-    interrupted: list[str] = []
-    engine: Any = None
-
-    def on_signal(signum: int, frame: FrameType | None) -> None:
-        name = signal.Signals(signum).name
-        interrupted.append(name)
-        if engine is not None and engine.ending:
-            return  # the safe state is being set and the file closed: never interrupt that
-        if engine is None or len(interrupted) > 1:
-            raise _Interrupted(name)  # nothing driven yet, or asked twice: stop now
-        engine.abort(f"interrupted by {name}")
-        print(
-            f"run_protocol: {name}: aborting, safe state follows (Ctrl-C again to hurry)",
-            file=sys.stderr,
-            flush=True,
-        )
-
-    # installed before anything is imported, connected or compiled
-    old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    gate = _GATE or _SignalGate().install()
     try:
         try:
-            engine, instruments = _connect(pf, bf, out, resume, seed, accept_bench_change)
+            gate.engine, instruments = _connect(pf, bf, out, resume, seed, accept_bench_change)
         except _Interrupted as exc:
             print(
                 f"run_protocol: interrupted by {exc} while connecting the bench: nothing was "
@@ -244,6 +290,7 @@ def _execute(
                 file=sys.stderr,
             )
             return int(ExitCode.INTERRUPTED if str(exc) == "SIGINT" else ExitCode.FAILED)
+        engine = gate.engine
         engine.subscribe(Progress(sys.stdout, quiet))
         try:
             try:
@@ -255,9 +302,12 @@ def _execute(
         finally:
             instruments.close()
     finally:
-        for s, h in old.items():
-            signal.signal(s, h)
-    code = exit_code(result, sigint="SIGINT" in interrupted)
+        gate.engine = None
+        if gate._watchdog is not None:
+            gate._watchdog.cancel()
+        if gate is not _GATE:
+            gate.restore()
+    code = exit_code(result, sigint="SIGINT" in gate.interrupted)
     line = final_line(result)
     print(line, file=sys.stdout if code == ExitCode.COMPLETE else sys.stderr, flush=True)
     return int(code)
@@ -296,13 +346,25 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="run_protocol", description="Run a measurement protocol into an HDF5 run file."
     )
-    add_arguments(parser)
-    args = parser.parse_args(argv)
+    global _GATE
+    gate = _GATE = _SignalGate().install()  # Ctrl-C is clean from here on
     try:
+        add_arguments(parser)
+        args = parser.parse_args(argv)
         return run(args)
     except CliError as exc:
         print(f"run_protocol: error: {exc}", file=sys.stderr)
         return 2
+    except _Interrupted as exc:
+        print(
+            f"run_protocol: interrupted by {exc} before the run started: nothing was switched "
+            "on, no file written",
+            file=sys.stderr,
+        )
+        return 130 if str(exc) == "SIGINT" else 1
+    finally:
+        _GATE = None
+        gate.restore()
 
 
 if __name__ == "__main__":

@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-__all__ = ["FileInUse", "RunFileLock", "lock_path", "read_lock"]
+__all__ = ["FileInUse", "RunFileLock", "in_use_by", "lock_path", "read_lock"]
 
 
 class FileInUse(RuntimeError):
@@ -58,6 +58,16 @@ def read_lock(path: str | Path) -> dict[str, Any] | None:
         return dict(json.loads(lock_path(path).read_text()))
     except (OSError, ValueError, TypeError):
         return None
+
+
+def in_use_by(path: str | Path) -> str | None:
+    """The one-line refusal when a live process holds the lock of ``path``, else ``None``
+    (for a check before anything is connected; the writer still takes the lock itself)."""
+    other = read_lock(path)
+    if other is None:
+        return None
+    lock = RunFileLock(path)
+    return None if lock._stale(other) else lock._in_use(other)
 
 
 class RunFileLock:

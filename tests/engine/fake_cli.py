@@ -1,7 +1,7 @@
 """``python -m engine.fake_cli ARGS...`` (from tests/): run_protocol with the bench replaced by
 the fake instruments (slow reads), for the SIGKILL / SIGINT subprocess tests. Prints the fake
 generator's output states as ``OUTPUTS {...}`` when the run returns. ``FAKE_CONNECT_S``: seconds
-the bench assembly takes (to interrupt it)."""
+the bench assembly takes (to interrupt it); ``FAKE_ABORT_BOUND_S``: the bound on an abort."""
 
 from __future__ import annotations
 
@@ -27,6 +27,7 @@ def _assemble(bf, *, seed=None, faults=None):  # type: ignore[no-untyped-def]
 
 
 daq.bench_assembly.assemble = _assemble  # type: ignore[assignment]
+rp.ABORT_BOUND_S = float(os.environ.get("FAKE_ABORT_BOUND_S", rp.ABORT_BOUND_S))
 
 if __name__ == "__main__":
     code = rp.main(sys.argv[1:])

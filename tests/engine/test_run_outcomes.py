@@ -221,3 +221,64 @@ def test_ctrl_c_during_the_run_shows_the_time_to_the_safe_state(proto_file, tmp_
     assert last.startswith("run aborted: interrupted by SIGINT")
     assert "safe state confirmed in" in last
     assert "OUTPUTS {1: False, 2: False}" in stdout
+
+
+def test_ctrl_c_during_a_point_that_hangs_is_bounded(proto_file, tmp_path) -> None:
+    """A read that takes 30 s (a DEM compiling, a stage homing): the first Ctrl-C asks for an
+    abort at the next boundary; after the bound the run is interrupted where it is."""
+    out = tmp_path / "h.h5"
+    os.environ["FAKE_ABORT_BOUND_S"] = "1"
+    try:
+        proc = _spawn([str(proto_file), "--out", str(out)], read_s=30)
+    finally:
+        os.environ.pop("FAKE_ABORT_BOUND_S")
+    t_end = time.monotonic() + 30
+    while not out.exists() and time.monotonic() < t_end:
+        time.sleep(0.05)
+    time.sleep(0.3)  # inside the first (hanging) read
+    t0 = time.monotonic()
+    proc.send_signal(signal.SIGINT)
+    stdout, stderr = proc.communicate(timeout=30)
+    assert time.monotonic() - t0 < 5
+    assert proc.returncode == 130, stderr
+    assert "safe state follows within 1 s" in stderr
+    assert "safe state confirmed in" in stderr.strip().splitlines()[-1]
+    assert "OUTPUTS {1: False, 2: False}" in stdout
+
+
+def test_a_vibrometer_that_stops_answering_stops_the_run_at_once(
+    protocol, bench, out, monkeypatch
+) -> None:
+    from instruments.errors import InstrumentTimeout
+
+    from .fakes import FakeVibrometer
+
+    asked: list[int] = []
+
+    def silent(self) -> float:  # type: ignore[no-untyped-def]
+        asked.append(1)
+        if len(asked) > 2:
+            raise InstrumentTimeout("vibrometer: no reply to 'Get,Controller,0,SignalLevel'")
+        return 0.9
+
+    monkeypatch.setattr(FakeVibrometer, "signal_level", silent)
+    res = RunEngine(protocol, bench, fake_bench(FakeWorld()), out).run()
+    assert res.status == "failed" and "vibrometer stopped answering" in res.reason
+    assert len(asked) == 3  # not three timeouts per point for every point left
+    assert res.n_failed == 0 and res.n_measured_now == 2
+    assert res.safe_state_s is not None  # the generator confirmed its outputs off
+
+
+def test_in_use_by_names_a_live_writer_and_ignores_a_dead_one(tmp_path) -> None:
+    from daq.store.lock import in_use_by
+
+    f = tmp_path / "x.h5"
+    assert in_use_by(f) is None
+    live = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(30)"])
+    try:
+        lock_path(f).write_text(json.dumps({"host": socket.gethostname(), "pid": live.pid}))
+        assert f"process {live.pid}" in (in_use_by(f) or "")
+    finally:
+        live.kill()
+        live.wait()
+    assert in_use_by(f) is None
