@@ -4,7 +4,8 @@ What is drawn (names without extension; each written as PNG and PDF):
 
 - ``quasi_bands``: the chain's quasi-band diagram with the scanned inputs (always);
 - ``amplitude_sweep``: far-cylinder spectrum against amplitude, both directions, and the
-  detuning (when a far cylinder was measured at some amplitude);
+  detuning (for the directions whose far cylinder was measured at two amplitudes or more; a
+  single amplitude is no sweep, and the summary says why the figure was left out);
 - per direction ``<dir>`` with measured points, at the highest amplitude measured:
   ``spectra_<dir>``, ``spatial_frequency_<dir>``, ``stft_<dir>``; and ``spatiotemporal_<dir>``
   at the lowest and the highest amplitude measured;
@@ -31,7 +32,16 @@ from analysis.summary import format_summary, summarize, write_summary
 from analysis.sweep import AmplitudeSweep, amplitude_sweep
 from protocols.runfile import RunData, ScanData
 
-__all__ = ["FigureReport", "measured_amplitudes", "stft_cylinders", "write_figures"]
+#: amplitudes with the far cylinder measured that an amplitude-sweep figure needs
+MIN_SWEEP_AMPLITUDES = 2
+
+__all__ = [
+    "MIN_SWEEP_AMPLITUDES",
+    "FigureReport",
+    "measured_amplitudes",
+    "stft_cylinders",
+    "write_figures",
+]
 
 
 @dataclass
@@ -84,14 +94,21 @@ def write_figures(run: RunData, out_dir: str | Path) -> FigureReport:
     _save(report, plot_quasi_bands(chain, inputs), out, "quasi_bands")
 
     sweeps: dict[str, AmplitudeSweep] = {}
+    sweep_why: dict[str, str] = {}
     for direction, scan in run.scans.items():
         amps = measured_amplitudes(scan)
         if not amps:
             report.skipped[f"*_{direction}"] = "no point measured"
             continue
         sw = amplitude_sweep(scan, chain)
-        if np.any(np.isfinite(sw.output_Hz)):
+        n_far = int(np.count_nonzero(np.isfinite(sw.output_Hz)))
+        if n_far >= MIN_SWEEP_AMPLITUDES:
             sweeps[direction] = sw
+        else:
+            sweep_why[direction] = (
+                f"{direction}: far cylinder {sw.far} measured at {n_far} amplitude(s); a sweep "
+                f"needs {MIN_SWEEP_AMPLITUDES}"
+            )
         f_range = sw.f_range_Hz
         rate = scan.sample_rate_Hz
         hi, lo = amps[-1], amps[0]
@@ -150,10 +167,13 @@ def write_figures(run: RunData, out_dir: str | Path) -> FigureReport:
 
     if sweeps:
         _save(report, plot_amplitude_sweep(sweeps), out, "amplitude_sweep")
+        for direction, why in sweep_why.items():
+            report.skipped[f"amplitude_sweep ({direction})"] = why
     else:
-        report.skipped["amplitude_sweep"] = "no far cylinder measured"
+        report.skipped["amplitude_sweep"] = "; ".join(sweep_why.values()) or "no scan measured"
 
     report.summary = summarize(run)
+    report.summary["figures_left_out"] = dict(report.skipped)
     report.summary_text = format_summary(report.summary)
     report.summary_path = write_summary(report.summary, out / "summary.json")
     return report

@@ -139,6 +139,8 @@ def format_summary(summary: dict[str, Any]) -> str:
             f"{khz(r['detuning_Hz']):>10} {khz(r['expected_output_Hz']):>10} {tr:>10} {gain:>7}  "
             f"{r['conversion']}"
         )
+    for name, why in summary.get("figures_left_out", {}).items():
+        lines.append(f"left out {name}: {why}")
     for direction, text in summary.get("output_peak", {}).items():
         lines.append(
             f"f_out: {text.replace('far-end output peak f_out', 'far-end output peak')}"

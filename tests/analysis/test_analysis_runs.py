@@ -238,3 +238,31 @@ def test_one_short_point_gives_what_it_can(tmp_path: Path) -> None:
     assert {"quasi_bands", "spectra_ltr", "spatial_frequency_ltr"} <= set(report.figures)
     assert set(report.skipped) == {"stft_ltr", "amplitude_sweep"}
     assert report.summary["rows"][0]["conversion"] == "not measured"
+
+
+def test_one_amplitude_leaves_out_the_sweep_and_says_why(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
+    """An amplitude sweep with one amplitude is degenerate: left out, the reason in the summary
+    (printed and in summary.json)."""
+    import json
+
+    run = synthetic.write_run(tmp_path / "one.h5", directions=("ltr",), amplitudes=(4e-6,))
+    assert biafc_main(["figures", str(run), "--out", str(tmp_path / "f")]) == 0
+    printed = capsys.readouterr().out
+    assert not (tmp_path / "f" / "amplitude_sweep.png").exists()
+    assert (tmp_path / "f" / "spectra_ltr.png").exists()
+    why = "far cylinder 31 measured at 1 amplitude(s); a sweep needs 2"
+    assert f"left out amplitude_sweep: ltr: {why}" in printed
+    summary = json.loads((tmp_path / "f" / "summary.json").read_text())
+    assert why in summary["figures_left_out"]["amplitude_sweep"]
+
+
+def test_a_direction_with_one_amplitude_is_left_out_of_the_sweep(tmp_path: Path) -> None:
+    run = synthetic.write_run(
+        tmp_path / "two.h5", directions=("ltr", "rtl"), amplitudes=(1e-6, 4e-6)
+    )
+    data = read_run(run)
+    data.scans["rtl"].done[1:] = 0  # rtl measured at its first amplitude only
+    data.scans["rtl"].velocity[1:] = np.nan
+    report = write_figures(data, tmp_path / "figs")
+    assert "amplitude_sweep" in report.figures
+    assert "rtl" in report.skipped["amplitude_sweep (rtl)"]
