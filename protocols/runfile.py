@@ -10,7 +10,8 @@ and nowhere else. Layout (see the design notes)::
     /chain            lengths_m [N], onset_Hz [N, B], cutoff_Hz [N, B];
                       attrs diameter_m, f0_N, beta_c
     /scan/<direction> NXdata (signal=velocity, axes=[amplitudes, cylinders, time]);
-                      attrs f_center_Hz, cycles (or width_s), averages
+                      attrs f_center_Hz, cycles and width_s (the burst's Gaussian sigma,
+                      s; both always given, one derived from the other), averages
         amplitudes    [A] float64, attr units
         cylinders     [C] int32, 1-based
         time          [S] float64, s from the trigger
@@ -28,6 +29,16 @@ and nowhere else. Layout (see the design notes)::
                       bench dem_runs_json: a JSON list with one entry per DEM run (direction,
                       kind, amplitude and its units, the same indicators). ``biafc simulate``
                       writes them at creation; the run engine when the file closes.
+
+The same file is valid NeXus, so NeXus readers (nexusformat, silx, h5web) open it with axes and
+units, without changing the layout above: the root is an ``NXroot`` whose ``default`` is
+``scan``; ``/scan`` is the ``NXentry`` (``default``: its first direction; ``start_time``);
+every ``/scan/<direction>`` is an ``NXdata`` whose signal (velocity) and axes carry ``units`` and
+``long_name``; ``/scan/sample`` (``NXsample``) names the chain and holds ``/chain``'s datasets
+(HDF5 hard links: the same data under two names, with units) and ``/scan/instrument``
+(``NXinstrument``) holds one group per instrument (its ``snapshot()`` as attribute ``json``;
+``NXdetector`` the vibrometer, ``NXpositioner`` the stage). Readers of the biafc layout ignore
+the NeXus attributes and groups.
 
 Writing uses SWMR and flushes after every point, so a crash loses at most the point in flight
 and a reader can follow a run live. HDF5 forbids changing attributes under SWMR, so the final
@@ -249,15 +260,19 @@ class RunFileWriter:
             snap = f.create_group("snapshot")
             snap.attrs["json"] = json.dumps(dict(snapshot or {}), default=str, sort_keys=True)
             g = f.create_group("chain")
-            g.create_dataset("lengths_m", data=np.asarray(chain.lengths_m, dtype=np.float64))
-            g.create_dataset("onset_Hz", data=np.atleast_2d(np.asarray(chain.onset_Hz, float)))
-            g.create_dataset("cutoff_Hz", data=np.atleast_2d(np.asarray(chain.cutoff_Hz, float)))
+            for name, data, units in (
+                ("lengths_m", np.asarray(chain.lengths_m, dtype=np.float64), "m"),
+                ("onset_Hz", np.atleast_2d(np.asarray(chain.onset_Hz, float)), "Hz"),
+                ("cutoff_Hz", np.atleast_2d(np.asarray(chain.cutoff_Hz, float)), "Hz"),
+            ):
+                g.create_dataset(name, data=data).attrs["units"] = units
             g.attrs["diameter_m"] = float(chain.diameter_m)
             g.attrs["f0_N"] = float(chain.f0_N)
             g.attrs["beta_c"] = float(chain.beta_c)
             scan_root = f.create_group("scan")
             for spec in scans:
                 cls._create_scan(scan_root, spec)
+            _nexus_entry(f, scans, dict(snapshot or {}))
             f.create_dataset("log", shape=(0,), maxshape=(None,), dtype=_LOG_DTYPE, chunks=(64,))
             if simulation:
                 sim = f.create_group("simulation")
@@ -286,25 +301,34 @@ class RunFileWriter:
         g.attrs["NX_class"] = "NXdata"
         g.attrs["signal"] = "velocity"
         g.attrs["axes"] = ["amplitudes", "cylinders", "time"]
+        for k, name in enumerate(("amplitudes", "cylinders", "time")):
+            g.attrs[f"{name}_indices"] = k
+        g.attrs["auxiliary_signals"] = ["drive"]
         g.attrs["f_center_Hz"] = float(spec.f_center_Hz)
-        g.attrs["cycles"] = float("nan") if spec.cycles is None else float(spec.cycles)
-        g.attrs["width_s"] = float("nan") if spec.width_s is None else float(spec.width_s)
+        cycles, width_s = _burst_cycles_and_width(spec)
+        g.attrs["cycles"] = cycles
+        g.attrs["width_s"] = width_s
         g.attrs["averages"] = int(spec.averages)
         amp = g.create_dataset("amplitudes", data=np.asarray(spec.amplitudes, dtype=np.float64))
         amp.attrs["units"] = spec.amplitude_units
+        amp.attrs["long_name"] = _AMPLITUDE_NAMES.get(spec.amplitude_units, "drive amplitude")
         cyl = g.create_dataset("cylinders", data=np.asarray(spec.cylinders, dtype=np.int32))
-        cyl.attrs["units"] = "1-based cylinder number"
+        cyl.attrs["units"] = ""  # a number: dimensionless
+        cyl.attrs["long_name"] = "cylinder (1-based, from the short end)"
         t = g.create_dataset("time", data=np.asarray(spec.time_s, dtype=np.float64))
         t.attrs["units"] = "s"
+        t.attrs["long_name"] = "time from the trigger"
         chunks = (1, 1, S)
         v = g.create_dataset(
             "velocity", shape=(A, C, S), dtype=np.float32, fillvalue=np.nan, chunks=chunks
         )
         v.attrs["units"] = "m/s"
+        v.attrs["long_name"] = "velocity (mean over averages)"
         d = g.create_dataset(
             "drive", shape=(A, C, S), dtype=np.float32, fillvalue=np.nan, chunks=chunks
         )
         d.attrs["units"] = spec.drive_units
+        d.attrs["long_name"] = "drive reference"
         g.create_dataset("done", shape=(A, C), dtype=np.uint8, fillvalue=0)
         m = g.create_dataset("measured_at", shape=(A, C), dtype=np.float64, fillvalue=np.nan)
         m.attrs["units"] = "s since the unix epoch"
@@ -432,6 +456,58 @@ def _publish(tmp: Path, path: Path) -> None:
         os.rename(tmp, path)
         return
     tmp.unlink()
+
+
+_AMPLITUDE_NAMES = {
+    "V": "generator amplitude (peak to peak)",
+    "m": "actuator displacement amplitude",
+    "N": "actuator force amplitude",
+}
+
+#: NeXus base class of each instrument's group under /scan/instrument (others: NXcollection)
+_INSTRUMENT_CLASSES = {"vibrometer": "NXdetector", "stage": "NXpositioner"}
+
+
+def _burst_cycles_and_width(spec: ScanSpec) -> tuple[float, float]:
+    """The burst's length in carrier cycles and its Gaussian sigma (s), whichever was given;
+    NaN for both when neither was."""
+    from instruments.burst import Burst
+
+    if spec.cycles is None and spec.width_s is None:
+        return float("nan"), float("nan")
+    b = Burst(spec.f_center_Hz, cycles=spec.cycles, width_s=None if spec.cycles else spec.width_s)
+    return b.duration_s * b.f_center_Hz, b.sigma_s
+
+
+def _nexus_entry(f: h5py.File, scans: Sequence[ScanSpec], snapshot: dict[str, Any]) -> None:
+    """The NeXus view of a run file being created (see the module docstring): NXroot with
+    ``/scan`` its NXentry, ``/scan/sample`` (``/chain``'s datasets), ``/scan/instrument``."""
+    f.attrs["NX_class"] = "NXroot"
+    f.attrs["default"] = "scan"
+    f.attrs["file_time"] = f.attrs["created"]
+    f.attrs["creator"] = f"biafc-lab {f.attrs['software_version']}"
+    entry = f["scan"]
+    entry.attrs["NX_class"] = "NXentry"
+    if scans:
+        entry.attrs["default"] = scans[0].direction
+    entry.create_dataset("start_time", data=str(f.attrs["created"]))
+    sample = entry.create_group("sample")
+    sample.attrs["NX_class"] = "NXsample"
+    sample.create_dataset("name", data=f"woodpile chain of {len(f['chain/lengths_m'])} cylinders")
+    for name in ("lengths_m", "onset_Hz", "cutoff_Hz"):
+        sample[name] = f["chain"][name]  # hard links: one dataset, two names
+    for key, value in f["chain"].attrs.items():
+        sample.attrs[key] = value
+    inst = entry.create_group("instrument")
+    inst.attrs["NX_class"] = "NXinstrument"
+    for name, snap in sorted(snapshot.items()):
+        if not isinstance(snap, dict) or name not in ("generator", "vibrometer", "stage",
+                                                      "digitiser"):  # fmt: skip
+            continue
+        g = inst.create_group(name)
+        g.attrs["NX_class"] = _INSTRUMENT_CLASSES.get(name, "NXcollection")
+        g.create_dataset("name", data=name)
+        g.attrs["json"] = json.dumps(snap, default=str, sort_keys=True)
 
 
 def _check_format(path: Path) -> None:
