@@ -45,16 +45,18 @@ def write_synthetic_scan(
     jitter_s: float = 1e-6,
     seed: int = 0,
     failed: Sequence[tuple[str, int, int]] = (),
+    sensitivity_m_per_s_per_V: float = 0.05,
 ) -> Path:
     """Write the synthetic scan to ``path`` (see the module docstring) and return it.
 
     ``amplitudes_m``: the protocol's amplitudes (actuator displacement the bench believes it
-    sends, m); ``failed``: (direction, amplitude index, cylinder index) points marked failed.
+    sends, m); ``failed``: (direction, amplitude index, cylinder index) points marked failed;
+    ``sensitivity_m_per_s_per_V``: the vibrometer range read back (it clips at 10 V).
     """
     rng = np.random.default_rng(seed)
     bench_text = default_bench_path().read_text(encoding="utf-8")
     bench = parse_bench(bench_text).bench
-    sens = 0.05  # the shipped bench's range "VD-09 50mm/s/V"
+    sens = float(sensitivity_m_per_s_per_V)
     clip = sens * min(10.0, float(bench.daq.velocity_range))
     chain = build_chain(true_spec)
     cyl = np.arange(1, chain.n + 1) if cylinders is None else np.asarray(cylinders)
@@ -89,7 +91,7 @@ def write_synthetic_scan(
         ScanSpec(d, amps, "m", cyl.astype(np.int32), t, INPUTS_HZ[d], cycles=cycles)
         for d in directions
     ]
-    snapshot = {"read_back": {"vibrometer": {"range": bench.vibrometer.range,
+    snapshot = {"read_back": {"vibrometer": {"range": f"VD-09 {sens * 1e3:g}mm/s/V",
                                              "sensitivity_m_per_s_per_V": sens}},
                 "synthetic": "analysis.synthetic_scan (truth withheld)"}  # fmt: skip
     w = RunFileWriter.create(

@@ -20,6 +20,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "stability": ("stability", "stiff and extreme cases, each with a verdict"),
     "figures": ("figures", "the paper's figures from a run file"),
     "compare": ("compare", "the model on what a run did, beside the measurement"),
+    "calibrate": ("calibrate", "fit the chain model to a scan's linear points"),
     "repair": ("repair", "make a run file left by a killed writer readable by any reader"),
     "gui": ("gui", "the bench window"),
 }

@@ -1,0 +1,129 @@
+"""``biafc calibrate RUN.h5 --fit F0,damping,diameter,stroke [--out fitted_chain.yaml]``.
+
+Fits the chain model to the run's low-amplitude (linear) points with the linear-response
+solver (:mod:`analysis.calibrate`), prints each fitted value with its uncertainty, the
+correlations and the residual before and after, and writes the fitted chain file (default
+``<RUN>_fitted_chain.yaml`` beside the run file; the fitted piezo stroke, a bench quantity, is
+in its header and in ``<out>.json``). When the run also holds nonlinear points, it then
+predicts them with the DEM from the start values and from the fit (``biafc compare``'s figure
+of merit on every point, before and after): the test of the model from its linear fit alone.
+``--figures DIR`` writes the before/after spectra and the comparison figures after the fit.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+
+from daq.cli.biafc import CliError
+
+__all__ = ["add_arguments", "run"]
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("run_file", type=Path, help="run file (HDF5) with a measured scan")
+    parser.add_argument(
+        "--fit",
+        default="F0,damping,diameter,stroke",
+        help="parameters to fit, comma-separated: F0, diameter, damping (the resonators' "
+        "modal damping ratio), stroke (the piezo's m/V), E (Young's modulus); "
+        "default F0,damping,diameter,stroke",
+    )
+    parser.add_argument("--chain", type=Path, help="start chain (YAML); default: the file's")
+    parser.add_argument("--out", type=Path, help="fitted chain file to write (.yaml)")
+    parser.add_argument("--figures", type=Path, help="folder for before/after figures")
+    parser.add_argument(
+        "--no-check",
+        action="store_true",
+        help="skip predicting the nonlinear points with the DEM before and after the fit",
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    from analysis.calibrate import CalibrationError, calibrate, parse_fit
+    from protocols.runfile import RunFileError, read_run
+    from sim_backend.dem import ChainFileError, load_chain_spec
+
+    path: Path = args.run_file
+    if not path.exists():
+        raise CliError(f"run file {path} does not exist")
+    try:
+        names = parse_fit(args.fit)
+    except CalibrationError as exc:
+        raise CliError(str(exc)) from None
+    try:
+        data = read_run(path)
+    except (RunFileError, OSError, KeyError) as exc:
+        raise CliError(f"{path}: cannot read as a run file ({exc})") from exc
+    if not data.scans:
+        raise CliError(f"{path}: the run file holds no scan")
+    spec = None
+    if args.chain is not None:
+        try:
+            spec = load_chain_spec(args.chain)
+        except ChainFileError as exc:
+            raise CliError(str(exc)) from None
+    try:
+        result = calibrate(data, names, chain_spec=spec)
+    except CalibrationError as exc:
+        raise CliError(str(exc)) from None
+    print(result.table())
+    out: Path = args.out or path.with_name(f"{path.stem}_fitted_chain.yaml")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(result.chain_yaml(path.name), encoding="utf-8")
+    summary = result.as_dict()
+    stroke_arg = ""
+    if result.stroke_m_per_V is not None and "stroke" in result.names:
+        stroke_arg = f" --piezo-stroke '{result.stroke_m_per_V * 1e6:.6g} um/V'"
+    if not args.no_check:
+        summary["prediction"] = _check(data, spec, result, args.figures)
+    if args.figures is not None:
+        _figures(data, spec, result, args.figures)
+    json_path = out.with_suffix(".json")
+    json_path.write_text(json.dumps(summary, indent=2), encoding="utf-8")
+    print(f"written {out}")
+    print(f"written {json_path}")
+    print(f"next: biafc compare {path} --chain {out}{stroke_arg}")
+    return 0 if result.success else 1
+
+
+def _check(data, spec, result, figures: Path | None) -> dict[str, float | None]:  # type: ignore[no-untyped-def]
+    """Figure of merit of the DEM prediction of every point, from the start and from the fit."""
+    from analysis.compare_report import compare_run
+
+    before = compare_run(data, None, chain_spec=spec).comparison
+    after_report = compare_run(
+        data,
+        None if figures is None else figures / "compare_after",
+        chain_spec=result.spec,
+        piezo_stroke_m_per_V=result.stroke_m_per_V if "stroke" in result.names else None,
+    )
+    after = after_report.comparison
+
+    def f(x: float) -> float | None:
+        return x if math.isfinite(x) else None
+
+    print(
+        f"DEM prediction of all {after.counts.get('ok', 0)} compared points (linear and "
+        f"nonlinear), figure of merit: {before.figure_of_merit:.3f} from the start values, "
+        f"{after.figure_of_merit:.3f} from the fit (time-domain {before.time_figure:.3f} -> "
+        f"{after.time_figure:.3f}, noise floor {after.noise_figure:.3f})"
+    )
+    return {
+        "figure_of_merit_before": f(before.figure_of_merit),
+        "figure_of_merit_after": f(after.figure_of_merit),
+        "time_residual_before": f(before.time_figure),
+        "time_residual_after": f(after.time_figure),
+        "noise_floor": f(after.noise_figure),
+    }
+
+
+def _figures(data, spec, result, folder: Path) -> None:  # type: ignore[no-untyped-def]
+    from analysis.calibrate import fit_spectra
+    from analysis.plots.calibration_plot import plot_calibration
+    from analysis.plots.style import save_figure
+
+    paths = save_figure(plot_calibration(fit_spectra(data, result, spec)), folder, "calibration")
+    print(f"written calibration: {', '.join(str(p) for p in paths)}")

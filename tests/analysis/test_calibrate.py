@@ -1,0 +1,131 @@
+"""``biafc calibrate``: the fit recovers a chain it is not told, and refuses what it cannot fit."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from analysis.calibrate import CalibrationError, calibrate, parse_fit
+from analysis.synthetic_scan import write_synthetic_scan
+from daq.cli.biafc import main as biafc
+from protocols.runfile import read_run
+from sim_backend.dem import build_chain, default_chain_spec, load_chain_spec
+
+BASE = default_chain_spec()
+#: the truth the fit is not told: F0 4.3 N, d 13.9 mm, resonators' Q 100 (default 250), stroke x0.8
+TRUE = BASE.model_copy(
+    update={
+        "preload": 4.3,
+        "diameter": 13.9e-3,
+        "damping": BASE.damping.model_copy(update={"resonator_ratio": 0.005}),
+    }
+)
+TRUE_VALUES = {"F0": 4.3, "diameter": 13.9e-3, "damping": 0.005, "stroke": 0.8 * 5e-8}
+TOLERANCE = {"F0": 0.02, "diameter": 0.02, "damping": 0.15, "stroke": 0.03}
+
+
+@pytest.fixture(scope="module")
+def measured(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Every third cylinder, one linear and one nonlinear amplitude, noise and trigger jitter."""
+    path = tmp_path_factory.mktemp("cal") / "measured.h5"
+    return write_synthetic_scan(
+        path,
+        true_spec=TRUE,
+        stroke_factor=0.8,
+        amplitudes_m=(30e-9, 3e-6),
+        cylinders=tuple(range(1, 32, 3)),
+        duration_s=8e-3,
+        noise_m_per_s=2e-6,
+        jitter_s=2e-6,
+        seed=3,
+        failed=[("rtl", 0, 4)],
+    )
+
+
+def test_fit_recovers_the_withheld_chain_from_the_defaults(measured: Path) -> None:
+    res = calibrate(read_run(measured))
+    assert res.success
+    assert res.start["F0"] == 5.0 and res.start["diameter"] == pytest.approx(13.6e-3)
+    for name, true in TRUE_VALUES.items():
+        err = abs(res.values[name] / true - 1.0)
+        assert err < TOLERANCE[name], f"{name}: {res.values[name]:.6g} against {true:.6g}"
+        assert 0 < res.std[name] < 0.05 * true
+    assert res.residual_after < 0.1 * res.residual_before
+    # the correlation matrix: unit diagonal, symmetric, every entry a correlation
+    c = res.correlation
+    assert np.allclose(np.diag(c), 1.0) and np.allclose(c, c.T) and np.all(np.abs(c) <= 1 + 1e-9)
+    assert res.n_points == 2 * 11 - 1  # the linear amplitude, one point failed
+    assert any("nonlinear points left out" in n for n in res.notes)
+
+
+def test_only_the_named_parameters_move(measured: Path) -> None:
+    res = calibrate(read_run(measured), ("stroke",))
+    assert res.names == ("stroke",)
+    assert res.spec.preload == BASE.preload and res.spec.diameter == BASE.diameter
+    assert res.correlation.shape == (1, 1)
+
+
+def test_too_few_cylinders_is_refused_saying_what_the_fit_needs(tmp_path: Path) -> None:
+    path = write_synthetic_scan(
+        tmp_path / "three.h5", true_spec=BASE, amplitudes_m=(30e-9,), cylinders=(1, 16, 31),
+        duration_s=6e-3,
+    )  # fmt: skip
+    with pytest.raises(CalibrationError, match=r"3 cylinder\(s\).*at least 5 cylinders"):
+        calibrate(read_run(path))
+
+
+def test_only_saturated_points_are_refused(tmp_path: Path) -> None:
+    # a sensitive range (5 mm/s/V: clips at 50 mm/s) and amplitudes of microns only
+    path = write_synthetic_scan(
+        tmp_path / "loud.h5", true_spec=BASE, amplitudes_m=(2e-6, 5e-6), cylinders=(1, 8, 16),
+        duration_s=6e-3, sensitivity_m_per_s_per_V=0.005,
+    )  # fmt: skip
+    with pytest.raises(CalibrationError, match="no linear point") as info:
+        calibrate(read_run(path))
+    msg = str(info.value)
+    assert "clipped" in msg and "delta0" in msg and "tens of nm" in msg
+
+
+def test_parse_fit_names_and_refuses_unknown() -> None:
+    assert parse_fit("F0, damping,diameter,stroke") == ("F0", "damping", "diameter", "stroke")
+    assert parse_fit("preload,E") == ("F0", "E")
+    with pytest.raises(CalibrationError, match="unknown parameter 'mass'"):
+        parse_fit("F0,mass")
+
+
+def test_cli_writes_a_chain_file_every_command_accepts(
+    measured: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "fitted_chain.yaml"
+    rc = biafc(["calibrate", str(measured), "--fit", "stroke", "--out", str(out), "--no-check"])
+    text = capsys.readouterr().out
+    assert rc == 0, text
+    assert "+/- (1 sigma)" in text and "before" in text and "--piezo-stroke" in text
+    assert "# stroke:" in out.read_text()
+    spec = load_chain_spec(out)
+    assert spec.preload == 5.0 and build_chain(spec).n == 31
+    summary = json.loads(out.with_suffix(".json").read_text())
+    assert set(summary["parameters"]) == {"stroke"}
+    # biafc bands and biafc compare take it as it is
+    assert biafc(["bands", "--chain", str(out)]) == 0
+    stroke = summary["parameters"]["stroke"]["value"]
+    cmp_dir = tmp_path / "cmp"
+    stroke_arg = f"{stroke * 1e6:.6g} um/V"
+    args = ["--chain", str(out), "--linear", "--piezo-stroke", stroke_arg, "--out", str(cmp_dir)]
+    assert biafc(["compare", str(measured), *args]) == 0
+    assert (cmp_dir / "comparison.json").exists()
+
+
+def test_cli_refusal_is_one_line_with_exit_2(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = write_synthetic_scan(
+        tmp_path / "two.h5", true_spec=BASE, amplitudes_m=(30e-9,), cylinders=(1, 31),
+        duration_s=6e-3,
+    )  # fmt: skip
+    assert biafc(["calibrate", str(path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "at least 5 cylinders" in err
