@@ -11,6 +11,8 @@ import pytest
 from analysis.calibrate import CalibrationError, calibrate, parse_fit
 from analysis.synthetic_scan import write_synthetic_scan
 from daq.cli.biafc import main as biafc
+from daq.cli.run_protocol import main as run_protocol
+from protocols.bench import default_bench_path
 from protocols.runfile import read_run
 from sim_backend.dem import build_chain, default_chain_spec, load_chain_spec
 
@@ -100,17 +102,24 @@ def test_cli_writes_a_chain_file_every_command_accepts(
     measured: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     out = tmp_path / "fitted_chain.yaml"
-    rc = biafc(["calibrate", str(measured), "--fit", "stroke", "--out", str(out), "--no-check"])
+    rc = biafc(["calibrate", str(measured), "--fit", "F0,stroke", "--out", str(out), "--no-check"])
     text = capsys.readouterr().out
     assert rc == 0, text
-    assert "+/- (1 sigma)" in text and "before" in text and "--piezo-stroke" in text
+    assert "correlations:" in text and "before" in text and "--piezo-stroke" in text
     assert "# stroke:" in out.read_text()
     spec = load_chain_spec(out)
-    assert spec.preload == 5.0 and build_chain(spec).n == 31
+    assert spec.preload != 5.0 and spec.diameter == BASE.diameter and build_chain(spec).n == 31
     summary = json.loads(out.with_suffix(".json").read_text())
-    assert set(summary["parameters"]) == {"stroke"}
-    # biafc bands and biafc compare take it as it is
+    assert set(summary["parameters"]) == {"F0", "stroke"}
+    # biafc bands, biafc simulate, the simulated bench and biafc compare take it as it is
     assert biafc(["bands", "--chain", str(out)]) == 0
+    sim = ["--direction", "ltr", "--amplitude", "0.1um", "--duration", "2ms"]
+    assert biafc(["simulate", "--chain", str(out), *sim, "--out", str(tmp_path / "s.h5")]) == 0
+    bench = tmp_path / "bench.yaml"
+    text = default_bench_path().read_text()
+    bench.write_text(text.replace("chain: null", f"chain: {out.name}", 1))
+    assert run_protocol(["smoke.yaml", "--bench", str(bench), "--out", str(tmp_path / "b.h5")]) == 0
+    assert read_run(tmp_path / "b.h5").chain.f0_N == pytest.approx(spec.preload)
     stroke = summary["parameters"]["stroke"]["value"]
     cmp_dir = tmp_path / "cmp"
     stroke_arg = f"{stroke * 1e6:.6g} um/V"
