@@ -21,37 +21,25 @@ from typing import Any
 
 from analysis.calibrate import calibrate
 from analysis.compare_report import compare_run
-from analysis.synthetic_scan import write_synthetic_scan
+from analysis.synthetic_scan import PROOF_SCAN, withheld_chain, write_synthetic_scan
 from protocols.runfile import read_run
-from sim_backend.dem import default_chain_spec
 
 TARGETS = {"F0": 0.02, "diameter": 0.02, "stroke": 0.03, "damping": 0.15}
 UNITS = {"F0": ("N", 1.0), "diameter": ("mm", 1e3), "damping": ("", 1.0), "stroke": ("um/V", 1e6)}
 
 
 def run() -> dict[str, Any]:
-    base = default_chain_spec()
-    true_spec = base.model_copy(
-        update={
-            "preload": 4.3,
-            "diameter": 13.9e-3,
-            "damping": base.damping.model_copy(update={"resonator_ratio": 0.005}),
-        }
-    )
-    truth = {"F0": 4.3, "diameter": 13.9e-3, "damping": 0.005, "stroke": 0.8 * 5e-8}
+    true_spec, factor = withheld_chain()
+    truth = {
+        "F0": true_spec.preload,
+        "diameter": true_spec.diameter,
+        "damping": true_spec.damping.resonator_ratio,
+        "stroke": factor * 5e-8,  # the shipped simulated bench says 0.05 um/V
+    }
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "synthetic.h5"
         t0 = time.perf_counter()
-        write_synthetic_scan(
-            path,
-            true_spec=true_spec,
-            stroke_factor=0.8,
-            amplitudes_m=(20e-9, 50e-9, 0.5e-6, 2e-6, 4e-6),
-            duration_s=12e-3,
-            noise_m_per_s=2e-6,
-            jitter_s=2e-6,
-            seed=7,
-        )
+        write_synthetic_scan(path, true_spec=true_spec, stroke_factor=factor, **PROOF_SCAN)  # type: ignore[arg-type]
         synth_s = time.perf_counter() - t0
         data = read_run(path)
         t0 = time.perf_counter()
