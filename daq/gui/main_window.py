@@ -116,6 +116,7 @@ class MainWindow(QMainWindow):
         self.run_panel = RunPanel()
         self.log_view = LogView()
         self.views = LiveViews()
+        self.views.on_model_error = lambda msg: self.log(msg, "warning")
         left = QSplitter(Qt.Orientation.Vertical)
         left.addWidget(self.bench_panel)
         left.addWidget(self.protocol_panel)
@@ -234,6 +235,29 @@ class MainWindow(QMainWindow):
                 self.live.chain = self.live.chain or chain
 
         BackgroundCall(lambda: chain_info(bf), done, name="biafc-gui-chain")
+
+    def _set_model_for_bench(self, bf: Any) -> None:
+        """The "model" overlay of a run about to start: the bench's chain, gain and stroke."""
+        from analysis.model_overlay import ModelOverlay
+        from daq.bench_assembly import _chain_spec
+
+        try:
+            overlay = ModelOverlay.for_bench(bf.bench, self.protocol_file.protocol, _chain_spec(bf))
+        except Exception as exc:
+            self.log(f"model overlay unavailable: {exc}", "warning")
+            overlay = None
+        self.views.set_model(overlay)
+
+    def _set_model_for_run(self, run: Any) -> None:
+        """The "model" overlay of an opened run file: its bench and the chain it records."""
+        from analysis.model_overlay import ModelOverlay
+
+        try:
+            overlay = ModelOverlay.for_run(run)
+        except Exception as exc:
+            self.log(f"model overlay unavailable: {exc}", "warning")
+            overlay = None
+        self.views.set_model(overlay)
 
     def _disconnect(self) -> None:
         inst, self.instruments = self.instruments, None
@@ -491,6 +515,7 @@ class MainWindow(QMainWindow):
             return False
         self.live = LiveData.for_plan(engine.plan, self.protocol_file.protocol, self.chain)
         self.views.show_chain(self.chain, self._f_in())
+        self._set_model_for_bench(bf)
         adapter = EngineEventAdapter(self)
         adapter.events_ready.connect(self._on_events)
         engine.subscribe(adapter)
@@ -623,6 +648,7 @@ class MainWindow(QMainWindow):
                 return
             self.live = live
             self.run_path = p
+            self._set_model_for_run(run)
             f_in = next(iter(live.scans.values())).f_center_Hz if live.scans else None
             self.views.show_chain(live.chain, f_in)
             self._redraw()

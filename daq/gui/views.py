@@ -4,10 +4,12 @@ none touches instruments. Traces are min/max decimated (:mod:`daq.gui.decimate`)
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pyqtgraph as pg
 from numpy.typing import NDArray
-from PySide6.QtWidgets import QTabWidget, QWidget
+from PySide6.QtWidgets import QCheckBox, QTabWidget, QWidget
 
 from daq.gui import refcount_guard
 from daq.gui.decimate import minmax_decimate
@@ -29,6 +31,7 @@ _CMAP = pg.colormap.get("viridis")
 _BAND_BRUSH = (255, 160, 0, 60)
 _INPUT_PEN = pg.mkPen((220, 0, 0), width=2, style=pg.QtCore.Qt.PenStyle.DashLine)
 _EDGE_PEN = pg.mkPen((255, 140, 0), width=2)
+_MODEL_PEN = pg.mkPen((0, 0, 0), width=1.5, style=pg.QtCore.Qt.PenStyle.DashLine)
 
 
 def _band_arrays(chain: ChainInfo | None) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -97,7 +100,20 @@ class SpectrumView(pg.PlotWidget):
         self.addItem(self.band)
         self.band.hide()
         self.getPlotItem().addLegend(offset=(-10, 10))
+        self.model_curve = self.plot(pen=_MODEL_PEN, name="model")
+        self.model_curve.hide()
         self.n_drawn = 0
+
+    def show_model(
+        self, freq_Hz: NDArray[np.float64] | None, mag: NDArray[np.float64] | None
+    ) -> None:
+        """The model's spectrum of the point (dashed), or hide it (``None``)."""
+        if freq_Hz is None or mag is None:
+            self.model_curve.hide()
+            return
+        m = np.where(mag > 0, mag, np.nan)
+        self.model_curve.setData(freq_Hz / 1e3, m)
+        self.model_curve.show()
 
     def show_spectrum(self, tr: Trace, f_in_Hz: float, chain: ChainInfo | None) -> None:
         mag = np.where(tr.magnitude > 0, tr.magnitude, np.nan)
@@ -138,7 +154,23 @@ class SpatialMapView(pg.PlotWidget):
         self.addItem(self.input_line)
         self.onset_curve = self.plot(pen=_EDGE_PEN)
         self.cutoff_curve = self.plot(pen=_EDGE_PEN)
+        self.model_peaks = pg.ScatterPlotItem(
+            symbol="x", size=10, pen=pg.mkPen((255, 255, 255), width=2), brush=None
+        )
+        self.model_peaks.setZValue(10)
+        self.addItem(self.model_peaks)
+        self.model_peaks.hide()
         self.n_rows = 0
+
+    def show_model_peaks(self, peak_Hz: NDArray[np.float64] | None) -> None:
+        """The model's peak frequency of every cylinder (white crosses), or hide (``None``)."""
+        if peak_Hz is None:
+            self.model_peaks.hide()
+            return
+        n = np.arange(1, peak_Hz.size + 1, dtype=float)
+        ok = np.isfinite(peak_Hz)
+        self.model_peaks.setData(peak_Hz[ok] / 1e3, n[ok])
+        self.model_peaks.show()
 
     def show_map(self, scan: ScanView, ai: int, chain: ChainInfo | None) -> None:
         mag = scan.spectrum[ai]  # [C, F]
@@ -286,7 +318,72 @@ class LiveViews(QTabWidget):
         self.addTab(self.spatial, "Spatial-frequency map")
         self.addTab(self.bands, "Quasi-bands")
         self.addTab(self.sweep, "Amplitude sweep")
+        self.model_box = QCheckBox("model")
+        self.model_box.setToolTip(
+            "overlay the DEM's prediction for the point being measured: its spectrum (dashed) "
+            "and every cylinder's predicted peak on the spatial-frequency map (crosses)"
+        )
+        self.model_box.setChecked(False)
+        self.model_box.toggled.connect(self._model_toggled)
+        self.setCornerWidget(self.model_box)
+        self.overlay: Any = None
+        self._data: LiveData | None = None
+        self._pending: set[tuple[Any, ...]] = set()
+        self.on_model_error: Any = None
         self.n_redraws = 0
+
+    def set_model(self, overlay: Any) -> None:
+        """The :class:`analysis.model_overlay.ModelOverlay` of what is shown (or ``None``)."""
+        self.overlay = overlay
+        self._pending.clear()
+        self._draw_model()
+
+    def _model_toggled(self, on: bool) -> None:
+        self._draw_model()
+
+    def _draw_model(self) -> None:
+        """Overlay the prediction for the last point, computing it on a worker thread once."""
+        data, ov = self._data, self.overlay
+        tr = data.last if data is not None else None
+        if not self.model_box.isChecked() or ov is None or tr is None or data is None:
+            self.spectrum.show_model(None, None)
+            self.spatial.show_model_peaks(None)
+            return
+        scan = data.scans.get(tr.direction)
+        f_range = (0.0, float(tr.freq_Hz[-1])) if tr.freq_Hz.size else (0.0, np.inf)
+        pred = ov.cached(tr.direction, tr.amplitude, tr.amplitude_units, tr.time_s)
+        if pred is None:
+            key = (tr.direction, tr.amplitude, tr.amplitude_units, tr.time_s.size)
+            if key in self._pending:
+                return
+            self._pending.add(key)
+            from daq.gui.background import BackgroundCall
+
+            def work() -> Any:
+                return ov.predict(
+                    tr.direction, tr.amplitude, tr.amplitude_units, tr.time_s, f_range
+                )
+
+            def done(_: Any, err: BaseException | None) -> None:
+                self._pending.discard(key)
+                if err is not None:
+                    if self.on_model_error is not None:
+                        self.on_model_error(f"model overlay: {err}")
+                    return
+                if ov is self.overlay:
+                    self._draw_model()
+
+            BackgroundCall(work, done, name="biafc-gui-model")
+            return
+        fmax = float(tr.freq_Hz[-1]) if tr.freq_Hz.size else np.inf
+        sel = pred.freq_Hz <= fmax
+        i = tr.cylinder - 1
+        if 0 <= i < pred.magnitude.shape[0]:
+            self.spectrum.show_model(pred.freq_Hz[sel], pred.magnitude[i, sel])
+        if scan is not None:
+            lo, hi = float(scan.freq_Hz[0]), float(scan.freq_Hz[-1])
+            peaks = np.where((pred.peak_Hz >= lo) & (pred.peak_Hz <= hi), pred.peak_Hz, np.nan)
+            self.spatial.show_model_peaks(peaks)
 
     def redraw(self, data: LiveData) -> None:
         """Draw everything from ``data`` (called at most a few times a second)."""
@@ -301,6 +398,8 @@ class LiveViews(QTabWidget):
                 ai = int(np.argmin(np.abs(scan.amplitudes - tr.amplitude)))
                 self.spatial.show_map(scan, ai, data.chain)
                 self.sweep.show_sweep(scan)
+        self._data = data
+        self._draw_model()
         self.n_redraws += 1
 
     def show_chain(self, chain: ChainInfo | None, f_in_Hz: float | None = None) -> None:
