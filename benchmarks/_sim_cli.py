@@ -8,17 +8,9 @@ from __future__ import annotations
 import sys
 from typing import Any
 
-import daq.bench_assembly
-import daq.cli.run_protocol as rp
+import daq.cli.run_protocol as rp  # only this before main: Ctrl-C is handled from there on
 
 _made: list[Any] = []
-_real = daq.bench_assembly.assemble
-
-
-def _keep(*args: Any, **kwargs: Any) -> Any:
-    inst = _real(*args, **kwargs)
-    _made.append(inst)
-    return inst
 
 
 def emulator_outputs(inst: Any) -> dict[int, bool]:
@@ -27,8 +19,28 @@ def emulator_outputs(inst: Any) -> dict[int, bool]:
     return {n: bool(c.output_on) for n, c in channels.items()}
 
 
+def _connect(*args: Any, **kwargs: Any) -> Any:
+    """run_protocol's own connect, keeping the assembled bench (imported only now)."""
+    import daq.bench_assembly
+
+    real = daq.bench_assembly.assemble
+
+    def keep(*a: Any, **k: Any) -> Any:
+        _made.append(real(*a, **k))
+        return _made[-1]
+
+    daq.bench_assembly.assemble = keep  # type: ignore[assignment]
+    try:
+        return _real_connect(*args, **kwargs)
+    finally:
+        daq.bench_assembly.assemble = real  # type: ignore[assignment]
+
+
+_real_connect = rp._connect
+
+
 def main(argv: list[str]) -> int:
-    daq.bench_assembly.assemble = _keep  # type: ignore[assignment]
+    rp._connect = _connect  # type: ignore[assignment]
     try:
         code = rp.main(argv)
     finally:

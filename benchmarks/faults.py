@@ -1,6 +1,7 @@
 """The fault campaign: every fault the simulated bench can inject, at an early, a middle and the
-last point, and SIGKILL / SIGINT at chosen and random moments (connecting and compiling, file
-creation, mid-run, closing), each checked end to end on the shipped ``smoke`` protocol.
+last point, and SIGKILL / SIGINT at chosen moments (connecting and compiling, file creation,
+mid-run, closing) and at three random ones over the length of an untouched run on this machine,
+each checked end to end on the shipped ``smoke`` protocol.
 
 Per row: the exit status and the one-line last message; the safe state as the emulated 33500B
 itself holds it (read from the emulator, not through the driver): off, or on *and* reported
@@ -348,10 +349,16 @@ def campaign(short: bool = False, tmp: Path | None = None, seed: int = 15) -> li
             rows.append(fault_row(name, moment, tmp_dir, clean, ref))
         rng = np.random.default_rng(seed)
         moments = ["mid-run"] if short else ["connecting", "creation", "mid-run", "closing"]
+        randoms: list[float] = []
+        if not short:  # random moments over the length of an untouched run on this machine
+            t0 = time.monotonic()
+            probe = _spawn([str(SMOKE), "--bench", str(slow), "--out", str(tmp_dir / "probe.h5")])
+            probe.communicate(timeout=120)
+            randoms = sorted(float(x) for x in rng.uniform(0.05, 0.9, 3) * (time.monotonic() - t0))
         for sig in (signal.SIGKILL, signal.SIGINT):
             for moment in moments:
                 rows.append(signal_row(sig, moment, tmp_dir, slow, clean, ref))
-            for at in [] if short else sorted(rng.uniform(0.2, 3.5, 3)):
+            for at in randoms:
                 rows.append(signal_row(sig, "random", tmp_dir, slow, clean, ref, float(at)))
         for r in rows:  # no machine paths in the report
             r.last_line = r.last_line.replace(str(tmp_dir) + os.sep, "")
