@@ -248,7 +248,7 @@ def linear_data(run: RunData, spec: ChainSpec, setup: RunSetup | None = None) ->
             "attenuation along it pin the parameters): scan more cylinders"
         )
     if n_nonlinear:
-        notes.append(f"{n_nonlinear} nonlinear points left out of the fit")
+        notes.append(f"{n_nonlinear} nonlinear points left out of the linear fit")
     if n_clipped:
         notes.append(f"{n_clipped} clipped points left out of the fit")
     return data
@@ -275,6 +275,8 @@ class CalibrationResult:
     success: bool
     message: str
     notes: list[str] = field(default_factory=list)
+    #: the DEM stage (``--nonlinear``): residual before and after, points, evaluations
+    dem_stage: dict[str, float] = field(default_factory=dict)
 
     def table(self) -> str:
         """The fitted values with their uncertainty, the correlations and the residuals."""
@@ -298,6 +300,13 @@ class CalibrationResult:
             f"{self.residual_after:.4f} after ({self.n_evaluations} model evaluations, "
             f"{self.wall_s:.1f} s)"
         )
+        if self.dem_stage:
+            st = self.dem_stage
+            lines.append(
+                f"DEM stage on every unclipped point ({int(st['points'])} points, linear and "
+                f"nonlinear): relative spectral residual {st['before']:.4f} from the linear "
+                f"fit, {st['after']:.4f} after ({int(st['evaluations'])} DEM batches)"
+            )
         lines += self.notes
         if not self.success:
             lines.append(f"the fit did not converge: {self.message}")
@@ -343,6 +352,7 @@ class CalibrationResult:
             "wall_s": self.wall_s,
             "success": self.success,
             "message": self.message,
+            "dem_stage": dict(self.dem_stage),
         }
 
 
@@ -416,8 +426,12 @@ def calibrate(
     *,
     chain_spec: ChainSpec | None = None,
     max_evaluations: int = 200,
+    nonlinear: bool = False,
+    max_dem_evaluations: int = 40,
 ) -> CalibrationResult:
-    """Fit ``fit`` to the linear points of ``run`` (see the module docstring)."""
+    """Fit ``fit`` to the linear points of ``run`` (see the module docstring); with
+    ``nonlinear``, then refine on every unclipped point (linear and nonlinear) with the batched
+    DEM, from the linear fit (values, uncertainties and correlations are then this stage's)."""
     t0 = time.perf_counter()
     names = parse_fit(list(fit))
     spec = chain_spec if chain_spec is not None else chain_spec_of_run(run)
@@ -454,20 +468,34 @@ def calibrate(
         max_nfev=max_evaluations, xtol=1e-10, ftol=1e-10,
     )  # fmt: skip
     values = model.values(sol.x)
-    J = sol.jac
-    m, p = J.shape
-    dof = max(1, m - p)
-    s2 = 2.0 * float(sol.cost) / dof
-    try:
-        cov = np.linalg.inv(J.T @ J) * s2
-    except np.linalg.LinAlgError:
-        cov = np.full((p, p), np.nan)
-    sd_x = np.sqrt(np.abs(np.diag(cov)))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        corr = cov / np.outer(sd_x, sd_x)
-    std = {n: values[n] * float(sd_x[i]) for i, n in enumerate(names)}
-    at_bound = [n for i, n in enumerate(names) if sol.active_mask[i] != 0]
+    m = int(sol.jac.shape[0])
+    std, corr = _uncertainty(sol, values, names)
     notes = list(data.notes)
+    residual_before = float(np.linalg.norm(r0)) / norm
+    residual_after = float(np.linalg.norm(sol.fun)) / norm
+    n_eval = model.n_eval
+    dem: dict[str, float] = {}
+    if nonlinear:
+        dm = _DemModel(run, setup, spec, start, names)
+        if dm.n_points == 0:
+            notes.append("--nonlinear: no unclipped point to fit with the DEM")
+        else:
+            x1 = np.asarray(sol.x, dtype=np.float64)
+            d0 = float(np.linalg.norm(dm.residuals(x1))) / dm.norm
+            sol = least_squares(
+                dm.residuals, x1, bounds=(lo, hi), method="trf", diff_step=1e-3,
+                max_nfev=max_dem_evaluations, xtol=1e-8, ftol=1e-8,
+            )  # fmt: skip
+            values = dm.values(sol.x)
+            std, corr = _uncertainty(sol, values, names)
+            dem = {
+                "before": d0,
+                "after": float(np.linalg.norm(sol.fun)) / dm.norm,
+                "points": float(dm.n_points),
+                "evaluations": float(dm.n_eval),
+            }
+            n_eval += dm.n_eval
+    at_bound = [n for i, n in enumerate(names) if sol.active_mask[i] != 0]
     if at_bound:
         notes.append(f"at a bound of the search range: {', '.join(at_bound)}")
     fitted_spec = _with(spec, {n: values[n] for n in names if n != "stroke"})
@@ -477,18 +505,98 @@ def calibrate(
         values={n: values[n] for n in names},
         std=std,
         correlation=corr,
-        residual_before=float(np.linalg.norm(r0)) / norm,
-        residual_after=float(np.linalg.norm(sol.fun)) / norm,
+        residual_before=residual_before,
+        residual_after=residual_after,
         n_points=data.n_points,
-        n_residuals=int(m),
-        n_evaluations=model.n_eval,
+        n_residuals=m,
+        n_evaluations=n_eval,
         wall_s=time.perf_counter() - t0,
         spec=fitted_spec,
         stroke_m_per_V=values["stroke"] if setup.stroke_m_per_V is not None else None,
         success=bool(sol.success),
         message=str(sol.message),
         notes=notes,
+        dem_stage=dem,
     )
+
+
+def _uncertainty(
+    sol: Any, values: dict[str, float], names: tuple[str, ...]
+) -> tuple[dict[str, float], NDArray[np.float64]]:
+    """Standard deviations (delta method) and correlations from the Jacobian at the solution."""
+    J = sol.jac
+    m, p = J.shape
+    s2 = 2.0 * float(sol.cost) / max(1, m - p)
+    try:
+        cov = np.linalg.inv(J.T @ J) * s2
+    except np.linalg.LinAlgError:
+        cov = np.full((p, p), np.nan)
+    sd_x = np.sqrt(np.abs(np.diag(cov)))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = cov / np.outer(sd_x, sd_x)
+    return {n: values[n] * float(sd_x[i]) for i, n in enumerate(names)}, corr
+
+
+class _DemModel:
+    """Residuals of every unclipped, measured point (linear and nonlinear) against the batched
+    DEM (:func:`analysis.model_run.predict`): the second, optional stage."""
+
+    def __init__(
+        self,
+        run: RunData,
+        setup: RunSetup,
+        spec: ChainSpec,
+        start: dict[str, float],
+        names: tuple[str, ...],
+    ) -> None:
+        self.setup, self.spec, self.start, self.names = setup, spec, start, names
+        self.n_eval = 0
+        self.mask: dict[str, NDArray[np.bool_]] = {}
+        self.measured: dict[str, NDArray[np.float64]] = {}
+        self.scale: dict[str, NDArray[np.float64]] = {}
+        self.sel = np.zeros(0, dtype=bool)
+        for d, ds in setup.directions.items():
+            scan = run.scans[d]
+            vel = np.asarray(scan.velocity, dtype=np.float64)
+            ok = point_states(scan.done, vel, setup.clip_m_per_s) == "ok"
+            if not np.any(ok):
+                continue
+            if self.sel.size == 0:
+                self.sel = _freq_sel(vel.shape[-1], ds.sample_rate_Hz)
+            m = _spectra(np.where(ok[..., None], vel, 0.0), ds.sample_rate_Hz, self.sel)
+            m[~ok] = 0.0
+            self.mask[d], self.measured[d] = ok, m
+            self.scale[d] = np.maximum(m.max(axis=(1, 2)), 1e-300)
+        self.n_points = int(sum(int(k.sum()) for k in self.mask.values()))
+        self.norm = math.sqrt(
+            sum(
+                float(np.sum((self.measured[d] / self.scale[d][:, None, None])[self.mask[d]] ** 2))
+                for d in self.mask
+            )
+        )
+
+    def values(self, x: NDArray[np.float64]) -> dict[str, float]:
+        v = dict(self.start)
+        for n, xi in zip(self.names, x, strict=True):
+            v[n] = self.start[n] * math.exp(float(xi))
+        return v
+
+    def residuals(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
+        from analysis.model_run import predict
+
+        self.n_eval += 1
+        v = self.values(x)
+        setup = self.setup
+        if setup.stroke_m_per_V is not None:
+            setup = setup.with_stroke(v["stroke"])
+        pred = predict(setup, build_chain(_with(self.spec, v)), directions=tuple(self.mask))
+        parts: list[NDArray[np.float64]] = []
+        for d, ok in self.mask.items():
+            ds = setup.directions[d]
+            p = _spectra(pred[d], ds.sample_rate_Hz, self.sel)
+            r = (p - self.measured[d]) / self.scale[d][:, None, None]
+            parts.append(r[ok].ravel())
+        return np.concatenate(parts)
 
 
 def with_stroke(setup: RunSetup, result: CalibrationResult) -> RunSetup:

@@ -3,8 +3,8 @@ not told about, written as a run file that looks like one from the simulated ben
 
 The "true" chain (``true_spec``) and the true piezo stroke (``stroke_factor`` times the
 bench's) drive one batched DEM run (every direction and amplitude, every cylinder); each
-point then gets its own trigger jitter (a random time shift, normal with ``jitter_s`` RMS, the
-record resampled), white vibrometer noise (``noise_m_per_s`` RMS) and the vibrometer's
+point then gets its own trigger jitter (a random time shift, normal with ``jitter_s`` RMS,
+applied exactly as a phase ramp), white vibrometer noise (``noise_m_per_s`` RMS) and the vibrometer's
 clipping. The file records what the lab believes: the shipped simulated bench (its amplifier
 gain and stroke), the default chain in ``/chain`` and the vibrometer range read back, so a fit
 that reads the file starts from the defaults.
@@ -104,6 +104,7 @@ def write_synthetic_scan(
         swmr=False,
     )
     bad = set(failed)
+    rate = float(sample_rate_Hz)
     r = 0
     gain_V = 1.0 / (bench.amplifier.gain * bench.amplifier.piezo_stroke)
     for d in directions:
@@ -112,8 +113,9 @@ def write_synthetic_scan(
                 if (d, a, c) in bad:
                     w.mark_failed(d, a, c)
                     continue
-                shift = rng.normal(0.0, jitter_s)
-                v = _on_time_axis(res.time_s, res.velocity[r, c], t - shift)
+                v = _on_time_axis(
+                    res.time_s, _delayed(res.velocity[r, c], rng.normal(0.0, jitter_s), rate), t
+                )
                 v = v + rng.normal(0.0, noise_m_per_s, size=v.shape)
                 v = np.clip(v, -clip, clip)
                 drive_V = _on_time_axis(res.time_s, res.drive[r], t) * gain_V / stroke_factor
@@ -121,6 +123,16 @@ def write_synthetic_scan(
             r += 1
     w.close("complete")
     return Path(path)
+
+
+def _delayed(v: np.ndarray, delay_s: float, rate_Hz: float) -> np.ndarray:
+    """``v`` delayed by ``delay_s`` exactly (band-limited: a phase ramp on the zero-padded
+    spectrum; a linear interpolation would also low-pass the record by a fraction of a per
+    cent at 9 kHz, which a calibration of the stroke would notice)."""
+    n = v.size
+    spec = np.fft.rfft(v, 2 * n)
+    f = np.fft.rfftfreq(2 * n, 1.0 / rate_Hz)
+    return np.fft.irfft(spec * np.exp(-2j * np.pi * f * delay_s), 2 * n)[:n]
 
 
 def withheld_chain() -> tuple[ChainSpec, float]:

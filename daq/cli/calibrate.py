@@ -35,6 +35,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, help="fitted chain file to write (.yaml)")
     parser.add_argument("--figures", type=Path, help="folder for before/after figures")
     parser.add_argument(
+        "--nonlinear",
+        action="store_true",
+        help="after the linear fit, refine on every unclipped point with the batched DEM",
+    )
+    parser.add_argument(
         "--no-check",
         action="store_true",
         help="skip predicting the nonlinear points with the DEM before and after the fit",
@@ -66,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
         except ChainFileError as exc:
             raise CliError(str(exc)) from None
     try:
-        result = calibrate(data, names, chain_spec=spec)
+        result = calibrate(data, names, chain_spec=spec, nonlinear=args.nonlinear)
     except CalibrationError as exc:
         raise CliError(str(exc)) from None
     print(result.table())
