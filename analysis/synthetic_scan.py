@@ -4,10 +4,10 @@ not told about, written as a run file that looks like one from the simulated ben
 The "true" chain (``true_spec``) and the true piezo stroke (``stroke_factor`` times the
 bench's) drive one batched DEM run (every direction and amplitude, every cylinder); each
 point then gets its own trigger jitter (a random time shift, normal with ``jitter_s`` RMS,
-applied exactly as a phase ramp), white vibrometer noise (``noise_m_per_s`` RMS) and the vibrometer's
-clipping. The file records what the lab believes: the shipped simulated bench (its amplifier
-gain and stroke), the default chain in ``/chain`` and the vibrometer range read back, so a fit
-that reads the file starts from the defaults.
+applied exactly as a phase ramp), white vibrometer noise (``noise_m_per_s`` RMS) and the
+vibrometer's clipping. The file records what the lab believes: the shipped simulated bench
+(its amplifier gain and stroke), the default chain in ``/chain`` and the vibrometer range
+read back, so a fit that reads the file starts from the defaults.
 """
 
 from __future__ import annotations
