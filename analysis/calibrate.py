@@ -35,12 +35,11 @@ m/V; a scale of every drive), ``E`` (Young's modulus, Pa).
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -597,16 +596,6 @@ class _DemModel:
             r = (p - self.measured[d]) / self.scale[d][:, None, None]
             parts.append(r[ok].ravel())
         return np.concatenate(parts)
-
-
-def with_stroke(setup: RunSetup, result: CalibrationResult) -> RunSetup:
-    """``setup`` with the fitted stroke (unchanged when the stroke was not fitted)."""
-    if result.stroke_m_per_V is None or "stroke" not in result.names:
-        return setup
-    return dataclasses.replace(setup).with_stroke(result.stroke_m_per_V)
-
-
-Solver = Literal["dem", "linear"]
 
 
 def fit_spectra(
