@@ -22,7 +22,14 @@ from protocols.bench import BenchFile, BenchSpec
 from protocols.runfile import ChainInfo
 from protocols.yamlfile import ConfigError
 
-__all__ = ["AssemblyError", "assemble", "chain_info", "model_chain_info", "sim_world_config"]
+__all__ = [
+    "AssemblyError",
+    "assemble",
+    "chain_info",
+    "model_chain_info",
+    "sim_world_config",
+    "stage_settings",
+]
 
 
 class AssemblyError(ConfigError):
@@ -116,6 +123,25 @@ def _import(module: str, name: str) -> Any:
         raise AssemblyError(f"driver {module}.{name} is not available ({exc})") from None
 
 
+def stage_settings(b: BenchSpec, clock: Any = None) -> Any:
+    """The :class:`instruments.zaber.ZaberSettings` of the bench file's stage (model or
+    microstep, resolution, device id, soft limits, speed, settling; ``clock``: the polling
+    time source, ``None``: the system clock)."""
+    zaber = importlib.import_module("instruments.zaber")
+    kw: dict[str, Any] = {
+        "model": b.stage.model,
+        "microstep_m": b.stage.microstep,
+        "resolution": b.stage.resolution,
+        "device_id": b.stage.device_id,
+        "soft_limits_m": (b.stage.soft_limits[0], b.stage.soft_limits[1]),
+        "speed_m_per_s": b.stage.speed,
+        "settle_s": b.stage.settle,
+    }
+    if clock is not None:
+        kw["clock"] = clock
+    return zaber.ZaberSettings(**kw)
+
+
 def build_drivers(
     b: BenchSpec, transports: Mapping[str, Any], clock: Any = None
 ) -> tuple[Any, Any, Any]:
@@ -132,19 +158,16 @@ def build_drivers(
     generator = keysight.KeysightGenerator(transports["generator"], limits)
     vibrometer = polytec.PolytecVibrometer(
         transports["vibrometer"],
-        polytec.PolytecSettings(min_signal_level=b.vibrometer.min_signal_level),
+        polytec.PolytecSettings(
+            min_signal_level=b.vibrometer.min_signal_level, commands=b.vibrometer.commands
+        ),
     )
-    stage_kw: dict[str, Any] = {
-        "soft_limits_m": (b.stage.soft_limits[0], b.stage.soft_limits[1]),
-        "speed_m_per_s": b.stage.speed,
-        "settle_s": b.stage.settle,
-    }
-    if clock is not None:
-        stage_kw["clock"] = clock
-    stage = zaber.ZaberStage(transports["stage"], zaber.ZaberSettings(**stage_kw))
-    # ask who they are now: a dead link fails at connect, and the snapshot records the identity
-    generator.identify()
-    vibrometer.identify()
+    stage = zaber.ZaberStage(transports["stage"], stage_settings(b, clock))
+    # ask who they are now: a dead link or the wrong stage fails at connect, before anything
+    # moves, and the snapshot records the identity
+    generator.connect()
+    vibrometer.connect()
+    stage.connect([float(p) for p in b.positions_m()])
     return generator, vibrometer, stage
 
 
@@ -181,12 +204,23 @@ def assemble(
     open_transport = _import("instruments.transport", "open_transport")
     transports = {
         "generator": open_transport(
-            b.generator.resource, name="generator", timeout_s=b.generator.timeout
+            b.generator.resource,
+            name="generator",
+            timeout_s=b.generator.timeout,
+            baud_rate=b.generator.baud_rate,
         ),
         "vibrometer": open_transport(
-            b.vibrometer.resource, name="vibrometer", timeout_s=b.vibrometer.timeout
+            b.vibrometer.resource,
+            name="vibrometer",
+            timeout_s=b.vibrometer.timeout,
+            baud_rate=b.vibrometer.baud_rate,
         ),
-        "stage": open_transport(b.stage.resource, name="stage", timeout_s=b.stage.timeout),
+        "stage": open_transport(
+            b.stage.resource,
+            name="stage",
+            timeout_s=b.stage.timeout,
+            baud_rate=b.stage.baud_rate,
+        ),
     }
     generator, vibrometer, stage = build_drivers(b, transports)
     digitiser = _import("daq.digitiser_nidaq", "NidaqDigitiser")(

@@ -14,6 +14,15 @@ Configuration, as the programming guide orders it (per channel ``n``)::
     TRIGn:SOUR BUS|EXT|IMM
     OUTP:TRIG:SOUR CHn ; OUTP:TRIG:SLOP POS ; OUTP:TRIG ON   trigger out to the digitiser
     SYST:ERR? until +0                          any error: outputs off, ReplyError
+
+The instrument plays an arbitrary waveform of ``n`` points in ``n / SRAT`` seconds (point ``k``
+at ``k / SRAT``): a burst sampled over its window ``T`` with ``n`` points (first and last at 0
+and ``T``) is played at ``SRAT = (n - 1) / T``, read back, so the carrier is the protocol's.
+
+At connect, ``*CLS`` clears the error queue (a stale error is not blamed on the first command)
+and ``*IDN?`` names the instrument. After a query times out, the link is brought back in step
+before anything else: device clear (the instrument drops its late reply), then ``*OPC?`` must
+read ``1``; otherwise the link is reported out of step.
 """
 
 from __future__ import annotations
@@ -28,7 +37,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from instruments.burst import burst_samples
-from instruments.errors import InstrumentError, LimitError, ReplyError
+from instruments.errors import InstrumentError, InstrumentTimeout, LimitError, ReplyError
 from instruments.interfaces import BurstConfig, Transport
 
 __all__ = ["DAC_FULL_SCALE", "GeneratorLimits", "KeysightGenerator", "dac_codes"]
@@ -139,12 +148,64 @@ class KeysightGenerator:
         self.channels = tuple(channels)
         self._configs: dict[int, BurstConfig] = {}
         self._outputs: dict[int, bool] = {ch: False for ch in self.channels}
+        self._played_rate: dict[int, float] = {}
         self._idn: str | None = None
+
+    # --- link -------------------------------------------------------------------------------
+    def _query(self, command: str) -> str:
+        """Query; after a timeout the link is resynchronised (:meth:`resync`) before raising."""
+        try:
+            return self.transport.query(command)
+        except InstrumentTimeout:
+            self.resync(command)
+            raise
+
+    def resync(self, after: str = "a timeout") -> None:
+        """Device clear and drain, then ``*OPC?`` must answer ``1``: a late reply is never read
+        as the answer to the next query. :class:`InstrumentError` when the link stays out of
+        step or silent."""
+        name = self.transport.name
+        clear = getattr(self.transport, "clear", None)
+        if clear is not None:
+            try:
+                clear()
+            except InstrumentError as exc:
+                log.warning("%s: device clear failed: %s", name, exc)
+        try:
+            reply = self.transport.query("*OPC?")
+        except InstrumentTimeout:
+            raise InstrumentTimeout(
+                f"{name}: no reply to {after!r} within {self.transport.timeout_s:g} s, nor to "
+                "'*OPC?' after a device clear: check that the generator is on and connected"
+            ) from None
+        if reply.strip() not in ("1", "+1"):
+            raise InstrumentError(
+                f"{name}: link out of step after a timeout on {after!r} (*OPC? read {reply!r})"
+            )
+
+    def connect(self) -> str:
+        """``*CLS`` (clear a stale error queue), ``*IDN?``; returns the identity."""
+        self.transport.write("*CLS")
+        return self.identify()
+
+    def identity(self) -> dict[str, Any]:
+        """Identity and, per channel, the output load as the instrument reports it (ohm;
+        ``inf`` for high Z), for ``biafc check``."""
+        idn = self._idn or self.identify()
+        loads: dict[str, float] = {}
+        for ch in self.channels:
+            raw = self._query(f"OUTP{ch}:LOAD?")
+            try:
+                value = float(raw)
+            except ValueError:
+                raise ReplyError(f"{self.transport.name}: OUTP{ch}:LOAD? read {raw!r}") from None
+            loads[str(ch)] = math.inf if value >= 9.9e37 else value
+        return {"identity": idn, "load_ohm": loads}
 
     # --- identity and errors ----------------------------------------------------------------
     def identify(self) -> str:
         """``*IDN?`` -> ``"Keysight Technologies,33522B,MY...,x.y"`` (ReplyError if malformed)."""
-        reply = self.transport.query("*IDN?")
+        reply = self._query("*IDN?")
         if reply.count(",") != 3:
             raise ReplyError(f"{self.transport.name}: malformed *IDN? reply {reply!r}")
         self._idn = reply
@@ -154,7 +215,7 @@ class KeysightGenerator:
         """Drain ``SYST:ERR?`` until ``+0``; returns e.g. ``["-222,Data out of range"]``."""
         found: list[str] = []
         for _ in range(_MAX_ERRORS):
-            reply = self.transport.query("SYST:ERR?")
+            reply = self._query("SYST:ERR?")
             m = _ERROR_RE.match(reply)
             if m is None:
                 raise ReplyError(f"{self.transport.name}: malformed SYST:ERR? reply {reply!r}")
@@ -183,14 +244,27 @@ class KeysightGenerator:
         self._check_channel(channel)
         self.limits.check(config)
         samples = burst_samples(config.shape, config.sample_rate_Hz)
-        self.configure_waveform(channel, samples, config)
+        # n points over the window T: the instrument plays point k at k / SRAT
+        played_rate = (samples.size - 1) / config.shape.duration_s
+        self.configure_waveform(channel, samples, config, played_rate)
 
     def configure_waveform(
-        self, channel: int, samples: NDArray[np.float64], config: BurstConfig
+        self,
+        channel: int,
+        samples: NDArray[np.float64],
+        config: BurstConfig,
+        sample_rate_Hz: float | None = None,
     ) -> None:
-        """As :meth:`configure_burst` with explicit normalised ``samples`` ``[n]`` (|x| <= 1)."""
+        """As :meth:`configure_burst` with explicit normalised ``samples`` ``[n]`` (|x| <= 1)
+        played at ``sample_rate_Hz`` (Sa/s; default ``config.sample_rate_Hz``): point ``k`` at
+        ``k / sample_rate_Hz`` s. The rate is read back and must agree to 1e-6."""
         self._check_channel(channel)
         self.limits.check(config)
+        rate = float(config.sample_rate_Hz if sample_rate_Hz is None else sample_rate_Hz)
+        if not (math.isfinite(rate) and 0 < rate <= self.limits.max_sample_rate_Hz):
+            raise LimitError(
+                f"arb sample rate {rate:g} Sa/s outside (0, {self.limits.max_sample_rate_Hz:g}]"
+            )
         codes = dac_codes(samples)
         if not 8 <= codes.size <= self.limits.max_points:
             raise LimitError(
@@ -203,16 +277,26 @@ class KeysightGenerator:
         peak = self.limits.max_generator_peak_V
         name = f"BIAFC{n}"
         try:
-            self._write_config(n, name, data, config, peak)
+            self._write_config(n, name, data, config, peak, rate)
             self.check_errors(f"configuring channel {n}")
+            got = float(self._query(f"SOUR{n}:FUNC:ARB:SRAT?"))
+            if abs(got - rate) > 1e-6 * rate:
+                raise ReplyError(
+                    f"{self.transport.name}: channel {n} plays at {got:.10g} Sa/s, "
+                    f"set {rate:.10g} Sa/s"
+                )
+        except ValueError:
+            self.safe_state()
+            raise ReplyError(f"{self.transport.name}: unreadable SRAT? reply") from None
         except InstrumentError:
             self.safe_state()
             raise
+        self._played_rate[channel] = got
         self._configs[channel] = config
         self._outputs[channel] = False
 
     def _write_config(
-        self, n: int, name: str, data: bytes, config: BurstConfig, peak_V: float
+        self, n: int, name: str, data: bytes, config: BurstConfig, peak_V: float, rate: float
     ) -> None:
         w = self.transport.write
         w(f"OUTP{n} OFF")
@@ -221,7 +305,7 @@ class KeysightGenerator:
         self.transport.write_block(f"SOUR{n}:DATA:ARB:DAC {name},", data)
         w(f"SOUR{n}:FUNC ARB")
         w(f"SOUR{n}:FUNC:ARB {name}")
-        w(f"SOUR{n}:FUNC:ARB:SRAT {config.sample_rate_Hz:.10g}")
+        w(f"SOUR{n}:FUNC:ARB:SRAT {rate:.12g}")
         w(f"OUTP{n}:LOAD INF")
         w(f"SOUR{n}:VOLT:LIM:HIGH {peak_V:.6g}")
         w(f"SOUR{n}:VOLT:LIM:LOW {-peak_V:.6g}")
@@ -277,7 +361,7 @@ class KeysightGenerator:
         if timeout_s is not None:
             self.transport.timeout_s = timeout_s
         try:
-            reply = self.transport.query("*OPC?")
+            reply = self._query("*OPC?")
         finally:
             self.transport.timeout_s = old
         if reply.strip() not in ("1", "+1"):
@@ -298,6 +382,7 @@ class KeysightGenerator:
                     amplitude_Vpp=cfg.amplitude_Vpp,
                     offset_V=cfg.offset_V,
                     sample_rate_Hz=cfg.sample_rate_Hz,
+                    played_sample_rate_Hz=self._played_rate.get(ch),
                     trigger_source=cfg.trigger_source,
                     load="INF",
                 )

@@ -1,10 +1,18 @@
-"""Polytec OFV-5000-class vibrometer controller with an OFV-534 sensor head (RS-232).
+"""Polytec OFV-5000 vibrometer controller with an OFV-534 sensor head (RS-232, 115200 8N1).
 
-Command grammar: ``Get,<Device>,<n>,<Property>`` (reply: the value), ``Set,<Device>,<n>,
-<Property>,<Value>`` (no reply; every Set is read back with Get), ``GetDevInfo,<Device>,<n>,
-<Item>``. Device and property names differ between firmware versions and decoder boards: every
-name is a field of :class:`PolytecSettings` (defaults are this project's assumptions, to be
-confirmed with ``GetDevInfo`` on the bench), not a constant baked in here.
+Grammar (Polytec "RS-232 Interface Commands", OFV-5000 user manual): ``Get,<Device>,<n>,<Item>``
+answers the current value, ``Set,<Device>,<n>,<Item>,<Value>`` answers nothing, and
+``GetDevInfo,<Device>,<n>,<Item>`` lists what is possible. Devices: ``Controller``,
+``SensorHead``, ``Interface`` (echo, baud rate) and the decoders, ``VeloDec,<n>`` (velocity) and
+``DisplDec,<n>`` (displacement), numbered per controller (a VD-09 is often ``VeloDec,1``). The
+decoder's range reads e.g. ``50mm/s/V``; ``MaxFreq`` its upper frequency for that range,
+``SignalDelay`` its transit delay (e.g. ``7.3us``).
+
+Every command is one entry of a table (:data:`DEFAULT_COMMANDS`), data in one place; a bench
+file overrides entries (``vibrometer: commands: {range_get: "Get,VeloDec,0,Range", ...}``)
+where its controller differs. At connect the interface echo is switched off and read back
+(an echoing controller sends each command line back before its reply; echoed lines are
+skipped either way), and every setting is read back after it is set.
 """
 
 from __future__ import annotations
@@ -12,18 +20,48 @@ from __future__ import annotations
 import logging
 import math
 import re
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from typing import Any
 
 from instruments.errors import InstrumentError, LimitError, ReplyError, SignalLostError
 from instruments.interfaces import Transport
 
-__all__ = ["PolytecSettings", "PolytecVibrometer", "parse_sensitivity", "parse_si_value"]
+__all__ = [
+    "DEFAULT_COMMANDS",
+    "PolytecSettings",
+    "PolytecVibrometer",
+    "parse_sensitivity",
+    "parse_si_value",
+]
+
+#: The RS-232 command table: key -> command (``{value}`` where a value is sent). Entries
+#: marked "unconfirmed" are not in the public command lists; confirm them on the controller
+#: (``GetDevInfo``) and override them in the bench file. ``None``: not available.
+DEFAULT_COMMANDS: dict[str, str | None] = {
+    "controller_name": "Get,Controller,0,Name",
+    "controller_version": "Get,Controller,0,Version",
+    "head_name": "Get,SensorHead,0,Name",
+    "echo_set": "Set,Interface,0,Echo,{value}",
+    "echo_get": "Get,Interface,0,Echo",
+    "decoder_name": "Get,VeloDec,1,Name",
+    "range_get": "Get,VeloDec,1,Range",
+    "range_set": "Set,VeloDec,1,Range,{value}",
+    "max_frequency_get": "Get,VeloDec,1,MaxFreq",
+    "signal_delay_get": "Get,VeloDec,1,SignalDelay",
+    "low_pass_get": None,  # unconfirmed name: a velocity decoder's output filter, if any
+    "signal_level_get": "Get,SensorHead,0,SignalLevel",  # unconfirmed
+    "autofocus_start": "Set,SensorHead,0,AutoFocus,Search",
+    "autofocus_result": "Get,SensorHead,0,AutoFocusResult",
+}
+#: replies that mean "no such item here"
+_NOT_AVAILABLE = ("ERROR", "NOT AVAILABLE", "NOT INSTALLED")
 
 log = logging.getLogger(__name__)
 
 _PREFIX = {"": 1.0, "k": 1e3, "M": 1e6, "m": 1e-3, "u": 1e-6, "µ": 1e-6, "n": 1e-9}
 _SENS_RE = re.compile(r"([0-9]*\.?[0-9]+(?:[eE][+-]?\d+)?)\s*(mm|um|µm|nm|m)\s*/\s*s\s*/\s*V")
+_DECODER_RE = re.compile(r"^([A-Za-z]{2}-\d+\w*)\s+(.+)$")
 _LEN = {"m": 1.0, "mm": 1e-3, "um": 1e-6, "µm": 1e-6, "nm": 1e-9}
 
 
@@ -53,43 +91,43 @@ def parse_si_value(text: str, unit: str) -> float:
 
 @dataclass(frozen=True)
 class PolytecSettings:
-    """Device/property names (confirm with ``GetDevInfo``) and thresholds.
+    """Command table overrides and thresholds.
 
     Attributes
     ----------
-    controller_device, head_device:
-        Device names whose ``GetDevInfo,<dev>,0,Name`` identify controller and sensor head.
-    decoder_device, decoder_index:
-        The velocity decoder (``Get,<decoder_device>,<decoder_index>,<property>``).
-    range_property, bandwidth_property, delay_property:
-        Decoder properties: range name, low-pass bandwidth (Hz), signal delay (s).
-    level_device, level_property, level_full_scale:
-        Signal level read-out and its full scale (level / full scale = 0..1).
-    autofocus_device, autofocus_property:
-        Autofocus command (``Set,<dev>,0,<property>,Start``); ``None`` when the head has none.
+    commands:
+        Entries of :data:`DEFAULT_COMMANDS` that differ on this controller (e.g. the decoder's
+        number); a key not in the table is refused.
+    level_full_scale:
+        Full scale of the signal-level reading (level / full scale = 0..1).
     min_signal_level:
-        Below this (0..1) :meth:`check_signal` raises :class:`SignalLostError`.
+        Below this (0..1) :meth:`PolytecVibrometer.check_signal` raises
+        :class:`SignalLostError`.
+    autofocus_timeout_s, autofocus_poll_s:
+        How long autofocus may take, and the polling period of its result (s).
     """
 
-    controller_device: str = "Controller"
-    head_device: str = "SensorHead"
-    decoder_device: str = "VelocityDecoder"
-    decoder_index: int = 0
-    range_property: str = "Range"
-    bandwidth_property: str = "LowPassFilter"
-    delay_property: str = "SignalDelay"
-    level_device: str = "SensorHead"
-    level_property: str = "SignalLevel"
+    commands: Mapping[str, str | None] = field(default_factory=dict)
     level_full_scale: float = 100.0
-    autofocus_device: str | None = "SensorHead"
-    autofocus_property: str = "AutoFocus"
     min_signal_level: float = 0.2
+    autofocus_timeout_s: float = 30.0
+    autofocus_poll_s: float = 0.5
 
     def __post_init__(self) -> None:
+        unknown = sorted(set(self.commands) - set(DEFAULT_COMMANDS))
+        if unknown:
+            raise LimitError(
+                f"vibrometer commands: unknown entries {unknown}; known: "
+                + ", ".join(DEFAULT_COMMANDS)
+            )
         if not (math.isfinite(self.level_full_scale) and self.level_full_scale > 0):
             raise LimitError(f"level_full_scale must be > 0, got {self.level_full_scale!r}")
         if not 0 <= self.min_signal_level <= 1:
             raise LimitError(f"min_signal_level must be in [0, 1], got {self.min_signal_level!r}")
+
+    def table(self) -> dict[str, str | None]:
+        """The command table in force (defaults with the overrides)."""
+        return {**DEFAULT_COMMANDS, **dict(self.commands)}
 
 
 class PolytecVibrometer:
@@ -98,57 +136,103 @@ class PolytecVibrometer:
     def __init__(self, transport: Transport, settings: PolytecSettings | None = None) -> None:
         self.transport = transport
         self.settings = settings or PolytecSettings()
+        self.commands = self.settings.table()
         self._identity: str | None = None
+        self._firmware: str | None = None
+        self._sent: str | None = None
 
-    def _get(self, device: str, index: int, prop: str) -> str:
-        cmd = f"Get,{device},{index},{prop}"
+    # --- wire ---------------------------------------------------------------------------
+    def _command(self, key: str, value: str | None = None) -> str:
+        template = self.commands[key]
+        if template is None:
+            raise ReplyError(
+                f"{self.transport.name}: no command for {key!r} on this controller "
+                "(set vibrometer: commands: in the bench file)"
+            )
+        return template.format(value=value) if value is not None else template
+
+    def _query(self, key: str) -> str:
+        cmd = self._command(key)
         reply = self.transport.query(cmd).strip()
-        if not reply or reply.upper().startswith("ERROR"):
+        for _ in range(4):  # an echoing controller sends the command line(s) back first
+            if reply not in (cmd, self._sent):
+                break
+            reply = self.transport.read().strip()
+        self._sent = None
+        if not reply or reply.upper().startswith(_NOT_AVAILABLE):
             raise ReplyError(f"{self.transport.name}: {cmd!r} answered {reply!r}")
         return reply
 
-    def _set(self, device: str, index: int, prop: str, value: str) -> None:
-        self.transport.write(f"Set,{device},{index},{prop},{value}")
+    def _set(self, key: str, value: str, readback: str) -> None:
+        """``Set`` then read back with ``readback``; :class:`ReplyError` when it differs."""
+        cmd = self._command(key, value)
+        self.transport.write(cmd)
+        self._sent = cmd
+        got = self._query(readback)
+        if got.replace(" ", "").lower() != value.replace(" ", "").lower():
+            raise ReplyError(
+                f"{self.transport.name}: {cmd!r} reads back {got!r} ({readback}), not {value!r}"
+            )
 
-    def _decoder(self, prop: str) -> str:
-        return self._get(self.settings.decoder_device, self.settings.decoder_index, prop)
+    # --- identity -----------------------------------------------------------------------
+    def connect(self) -> str:
+        """Echo off (read back), then :meth:`identify`."""
+        self._set("echo_set", "Off", "echo_get")
+        return self.identify()
 
     def identify(self) -> str:
-        """``"<controller> / <head>"`` from ``GetDevInfo,<dev>,0,Name``."""
-        names = []
-        for dev in (self.settings.controller_device, self.settings.head_device):
-            cmd = f"GetDevInfo,{dev},0,Name"
-            reply = self.transport.query(cmd).strip()
-            if not reply or reply.upper().startswith("ERROR"):
-                raise ReplyError(f"{self.transport.name}: {cmd!r} answered {reply!r}")
-            names.append(reply)
-        self._identity = " / ".join(names)
+        """``"<controller> / <head>"`` (e.g. ``"OFV-5000 / OFV-534"``)."""
+        self._identity = f"{self._query('controller_name')} / {self._query('head_name')}"
+        try:
+            self._firmware = self._query("controller_version")
+        except ReplyError:
+            self._firmware = None
         return self._identity
 
+    def identity(self) -> dict[str, Any]:
+        """Controller, head, firmware, decoder and range as read (for ``biafc check``)."""
+        return {
+            "identity": self._identity or self.identify(),
+            "firmware": self._firmware,
+            "velocity_range": self.velocity_range(),
+        }
+
+    # --- decoder ------------------------------------------------------------------------
     def velocity_range(self) -> str:
-        return self._decoder(self.settings.range_property)
+        """``"<decoder> <range>"``, e.g. ``"VD-09 50mm/s/V"``."""
+        return f"{self._query('decoder_name')} {self._query('range_get')}"
 
     def set_velocity_range(self, name: str) -> None:
-        """Select decoder range ``name`` (e.g. ``"VD-09 10mm/s/V"``), read back to confirm."""
+        """Select range ``name`` (``"VD-09 10mm/s/V"`` or ``"10mm/s/V"``) on the table's
+        decoder; the decoder's name must match when given, and the range is read back."""
         parse_sensitivity(name)  # refuse a name we could not use, before sending
-        s = self.settings
-        self._set(s.decoder_device, s.decoder_index, s.range_property, name)
-        got = self.velocity_range()
-        if got != name:
-            raise ReplyError(f"{self.transport.name}: range set to {name!r}, reads back {got!r}")
+        m = _DECODER_RE.match(name.strip())
+        decoder, value = (m.group(1), m.group(2)) if m else ("", name.strip())
+        if decoder:
+            have = self._query("decoder_name")
+            if have.replace(" ", "").upper() != decoder.replace(" ", "").upper():
+                raise ReplyError(
+                    f"{self.transport.name}: range {name!r} asks for decoder {decoder}, "
+                    f"{self._command('decoder_name')!r} is {have!r}: set vibrometer: commands: "
+                    "in the bench file for this controller's decoder number"
+                )
+        self._set("range_set", value, "range_get")
 
     def sensitivity_m_per_s_per_V(self) -> float:
-        return parse_sensitivity(self.velocity_range())
+        return parse_sensitivity(self._query("range_get"))
 
     def bandwidth_Hz(self) -> float:
-        return parse_si_value(self._decoder(self.settings.bandwidth_property), "Hz")
+        """The decoder's upper frequency for its range (``MaxFreq``), or the low-pass filter's
+        cut-off when the table has a command for it."""
+        key = "low_pass_get" if self.commands["low_pass_get"] is not None else "max_frequency_get"
+        return parse_si_value(self._query(key), "Hz")
 
     def signal_delay_s(self) -> float:
-        return parse_si_value(self._decoder(self.settings.delay_property), "s")
+        return parse_si_value(self._query("signal_delay_get"), "s")
 
     def signal_level(self) -> float:
         s = self.settings
-        raw = self._get(s.level_device, 0, s.level_property)
+        raw = self._query("signal_level_get")
         try:
             value = float(raw)
         except ValueError:
@@ -167,26 +251,42 @@ class PolytecVibrometer:
             )
         return level
 
-    def autofocus(self) -> bool:
-        """Start autofocus if the head has one; returns whether it was started."""
-        s = self.settings
-        if s.autofocus_device is None:
+    def autofocus(self, clock: Any = None) -> bool:
+        """Start autofocus and wait for ``Found``; ``False`` when the table has no autofocus.
+        ``clock`` (``now``/``sleep``) paces the polling; default: the system clock."""
+        if self.commands["autofocus_start"] is None:
             return False
-        self._set(s.autofocus_device, 0, s.autofocus_property, "Start")
-        return True
+        from instruments.clock import SystemClock
+
+        clk = clock or SystemClock()
+        self.transport.write(self._command("autofocus_start"))
+        self._sent = self._command("autofocus_start")
+        t_end = clk.now() + self.settings.autofocus_timeout_s
+        while True:
+            result = self._query("autofocus_result")
+            if result.strip().lower() == "found":
+                return True
+            if clk.now() > t_end:
+                raise ReplyError(
+                    f"{self.transport.name}: autofocus not found within "
+                    f"{self.settings.autofocus_timeout_s:g} s (last {result!r})"
+                )
+            clk.sleep(self.settings.autofocus_poll_s)
 
     def snapshot(self) -> dict[str, Any]:
-        """Identity, range, sensitivity, bandwidth, delay, signal level (SI)."""
+        """Identity, firmware, range, sensitivity, bandwidth, delay, signal level (SI)."""
         range_name = self.velocity_range()
         return {
             "model": "Polytec OFV-5000",
             "identity": self._identity or self.identify(),
+            "firmware": self._firmware,
             "resource": self.transport.name,
             "velocity_range": range_name,
             "sensitivity_m_per_s_per_V": parse_sensitivity(range_name),
             "bandwidth_Hz": self.bandwidth_Hz(),
             "signal_delay_s": self.signal_delay_s(),
             "signal_level": self.signal_level(),
+            "commands": dict(self.settings.commands),
         }
 
     def safe_state(self) -> None:

@@ -1,10 +1,17 @@
 """Zaber linear stage, ASCII protocol, positions in metres.
 
-Request ``/<device> <axis> <command>``; reply ``@<device> <axis> <OK|RJ> <IDLE|BUSY> <flag> <data>``
-e.g. ``@01 1 OK IDLE -- 0``. Warning flags (``--`` when none): ``WR`` no reference position
+Request ``/<device> <axis> <id> <command>``; reply
+``@<device> <axis> <id> <OK|RJ> <IDLE|BUSY> <flag> <data>``, e.g. ``@01 1 07 OK IDLE -- 0``. The
+message id (0..99, the protocol's own) ties each reply to its request: a reply that arrives late,
+after its request timed out, carries the old id and is discarded instead of being taken as the
+answer to the next command. Warning flags (``--`` when none): ``WR`` no reference position
 (not homed), ``FS`` stalled and stopped, ``WL`` unexpected limit switch, ``FQ``/``FE`` encoder
-faults, ``NI`` a move was interrupted. Positions travel as microsteps; ``microstep_m`` converts.
-Speeds travel as ``microsteps/s x 1.6384`` (``maxspeed`` units).
+faults, ``NI`` a move was interrupted. Positions travel as microsteps; the size of one depends on
+the device (an X-LSM's is 0.047625 um at the default resolution of 64 microsteps per step). The
+bench file names the stage model or its microstep; :meth:`ZaberStage.connect` reads
+``get deviceid``, ``get resolution`` and ``get limit.min/max`` and refuses a stage that does not
+match, or whose travel does not hold the cylinder positions. Speeds travel as
+``microsteps/s x 1.6384`` (``maxspeed`` units).
 """
 
 from __future__ import annotations
@@ -12,6 +19,7 @@ from __future__ import annotations
 import logging
 import math
 import re
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -26,12 +34,24 @@ from instruments.errors import (
 )
 from instruments.interfaces import Transport
 
-__all__ = ["SPEED_UNIT", "ZaberReply", "ZaberSettings", "ZaberStage", "parse_reply"]
+__all__ = [
+    "FULL_STEP_M",
+    "SPEED_UNIT",
+    "ZaberReply",
+    "ZaberSettings",
+    "ZaberStage",
+    "microstep_of_model",
+    "parse_reply",
+]
 
 log = logging.getLogger(__name__)
 
 #: ``maxspeed`` data per (microstep/s)
 SPEED_UNIT = 1.6384
+#: full-step length (m) of Zaber lead-screw stage families; microstep = full step / resolution.
+#: X-LSM and T-LSM: 0.047625 um per microstep at the default resolution 64 (datasheets).
+FULL_STEP_M: dict[str, float] = {"X-LSM": 0.047625e-6 * 64, "T-LSM": 0.047625e-6 * 64}
+_MODEL_RE = re.compile(r"^([A-Z]+-[A-Z]+?)(\d+)")
 _REPLY_RE = re.compile(r"^@(\d+)\s+(\d+)\s+(?:(\d+)\s+)?(OK|RJ)\s+(IDLE|BUSY)\s+(\S\S)\s*(.*)$")
 _FAULT_FLAGS = {"FS": "stalled and stopped", "FQ": "encoder error", "FE": "encoder fault"}
 _LIMIT_FLAGS = {"WL": "unexpected limit switch"}
@@ -47,6 +67,23 @@ class ZaberReply:
     busy: bool
     flag: str
     data: str
+    message_id: int | None = None
+
+
+def microstep_of_model(model: str, resolution: int) -> tuple[float, float]:
+    """(microstep m, nominal travel m) of a Zaber stage ``model`` (e.g. ``"X-LSM500A"``) at
+    ``resolution`` microsteps per step; :class:`LimitError` for a family not in
+    :data:`FULL_STEP_M` (give the microstep in the bench file instead)."""
+    m = _MODEL_RE.match(model.strip().upper())
+    if m is None or m.group(1) not in FULL_STEP_M:
+        known = ", ".join(sorted(FULL_STEP_M))
+        raise LimitError(
+            f"stage model {model!r}: microstep unknown (known families: {known}); give "
+            "'microstep' with units in the bench file instead, e.g. '0.047625 um'"
+        )
+    if resolution <= 0:
+        raise LimitError(f"stage resolution must be > 0 microsteps per step, got {resolution}")
+    return FULL_STEP_M[m.group(1)] / resolution, int(m.group(2)) * 1e-3
 
 
 def parse_reply(line: str) -> ZaberReply:
@@ -61,6 +98,7 @@ def parse_reply(line: str) -> ZaberReply:
         m.group(5) == "BUSY",
         m.group(6),
         m.group(7).strip(),
+        int(m.group(3)) if m.group(3) is not None else None,
     )
 
 
@@ -72,8 +110,19 @@ class ZaberSettings:
     ----------
     device, axis:
         Zaber device address and axis number.
+    model:
+        Stage model (e.g. ``"X-LSM500A"``): gives the microstep (with the resolution read at
+        connect) and the nominal travel the device's ``limit.max`` must agree with.
     microstep_m:
-        Length of one microstep (m), from the stage's datasheet.
+        Length of one microstep (m) at ``resolution``, from the stage's datasheet; with a
+        ``model`` too, both must agree. One of the two is needed before the stage moves.
+    resolution:
+        Microsteps per step the bench file's microstep refers to (default 64, the factory
+        setting); the device's ``get resolution`` must match it.
+    device_id:
+        Expected ``get deviceid`` (``None``: read and recorded, not checked).
+    message_ids:
+        Send a message id with each command and take only the reply that carries it.
     soft_limits_m:
         (low, high) m, intersected with the device limits; ``None``: device limits only.
     speed_m_per_s:
@@ -97,7 +146,11 @@ class ZaberSettings:
 
     device: int = 1
     axis: int = 1
-    microstep_m: float = 0.49609375e-6
+    model: str | None = None
+    microstep_m: float | None = None
+    resolution: int = 64
+    device_id: int | None = None
+    message_ids: bool = True
     soft_limits_m: tuple[float, float] | None = None
     speed_m_per_s: float = 0.025
     approach_m: float = 0.5e-3
@@ -109,7 +162,11 @@ class ZaberSettings:
     clock: Clock = field(default_factory=SystemClock, compare=False)
 
     def __post_init__(self) -> None:
-        for name in ("microstep_m", "speed_m_per_s", "poll_interval_s", "home_timeout_s"):
+        if self.microstep_m is not None and not (
+            math.isfinite(self.microstep_m) and self.microstep_m > 0
+        ):
+            raise LimitError(f"stage microstep_m must be > 0, got {self.microstep_m!r}")
+        for name in ("speed_m_per_s", "poll_interval_s", "home_timeout_s"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise LimitError(f"stage {name} must be > 0, got {value!r}")
@@ -124,30 +181,52 @@ class ZaberSettings:
 
 
 class ZaberStage:
-    """A Zaber axis on a :class:`Transport` (implements ``Stage``); positions in metres."""
+    """A Zaber axis on a :class:`Transport` (implements ``Stage``); positions in metres.
+
+    The microstep is resolved by :meth:`connect` (called before the first move if nobody did):
+    nothing moves until the device's identity agrees with the settings.
+    """
 
     def __init__(self, transport: Transport, settings: ZaberSettings | None = None) -> None:
         self.transport = transport
         self.settings = settings or ZaberSettings()
         self._device_limits_m: tuple[float, float] | None = None
         self._speed_set = False
+        self._microstep_m: float | None = None
+        self._identity: dict[str, Any] | None = None
+        self._next_id = 0
 
     # --- wire ---------------------------------------------------------------------------
+    def _message_id(self) -> int:
+        mid = self._next_id
+        self._next_id = (self._next_id + 1) % 100
+        return mid
+
     def command(self, text: str) -> ZaberReply:
-        """Send ``/<dev> <axis> <text>``, parse the reply; RJ -> error, fault flags -> error."""
+        """Send ``/<dev> <axis> [<id>] <text>``, take the reply carrying the id; RJ -> error,
+        fault flags -> error. Stale replies (an earlier id) and info/alert lines are skipped."""
         s = self.settings
-        cmd = f"/{s.device} {s.axis} {text}".rstrip()
+        mid = self._message_id() if s.message_ids else None
+        head = f"/{s.device} {s.axis}" + (f" {mid:02d}" if mid is not None else "")
+        cmd = f"{head} {text}".rstrip()
         reply = self.transport.query(cmd)
-        for _ in range(8):  # skip info (#) and alert (!) messages between command and reply
-            if not reply.startswith(("#", "!")):
-                break
-            reply = self.transport.read()
-        try:
-            r = parse_reply(reply)
-        except ReplyError:
-            raise ReplyError(
-                f"{self.transport.name}: malformed reply to {cmd!r}: {reply!r}"
-            ) from None
+        for _ in range(16):
+            if reply.startswith(("#", "!")):  # info and alert messages
+                reply = self.transport.read()
+                continue
+            try:
+                r = parse_reply(reply)
+            except ReplyError:
+                raise ReplyError(
+                    f"{self.transport.name}: malformed reply to {cmd!r}: {reply!r}"
+                ) from None
+            if mid is not None and r.message_id != mid:
+                log.info("%s: discarded stale reply %r (waiting for id %02d)", cmd, reply, mid)
+                reply = self.transport.read()
+                continue
+            break
+        else:
+            raise ReplyError(f"{self.transport.name}: no reply to {cmd!r} among the lines read")
         if r.device != s.device:
             raise ReplyError(f"{self.transport.name}: reply to {cmd!r} from device {r.device}")
         self._check_flags(cmd, r)
@@ -167,9 +246,6 @@ class ZaberStage:
                 f"{self.transport.name}: {_LIMIT_FLAGS[r.flag]} ({r.flag}) after {cmd!r}"
             )
 
-    def _steps(self, position_m: float) -> int:
-        return round(float(position_m) / self.settings.microstep_m)
-
     def _get_int(self, setting: str) -> int:
         r = self.command(f"get {setting}")
         try:
@@ -179,17 +255,99 @@ class ZaberStage:
                 f"{self.transport.name}: 'get {setting}' answered {r.data!r}"
             ) from None
 
+    # --- identity -----------------------------------------------------------------------
+    def connect(self, positions_m: Sequence[float] = ()) -> dict[str, Any]:
+        """Read ``deviceid``, ``resolution``, ``limit.min/max``; resolve the microstep and refuse
+        (:class:`LimitError`, one line, nothing moved) when they disagree with the settings or
+        when a position of ``positions_m`` (m) is outside the device's travel."""
+        s = self.settings
+        name = self.transport.name
+        device_id = self._get_int("deviceid")
+        resolution = self._get_int("resolution")
+        lo_steps = self._get_int("limit.min")
+        hi_steps = self._get_int("limit.max")
+        if s.device_id is not None and device_id != s.device_id:
+            raise LimitError(
+                f"{name}: device id {device_id}, the bench file expects {s.device_id}: "
+                "another stage on this port?"
+            )
+        nominal_m: float | None = None
+        step: float | None = None
+        if s.model is not None:
+            step, nominal_m = microstep_of_model(s.model, resolution)
+        if s.microstep_m is not None:
+            if resolution != s.resolution:
+                raise LimitError(
+                    f"{name}: the device runs at resolution {resolution} microsteps/step, the "
+                    f"bench file's microstep {s.microstep_m * 1e6:.6g} um is for {s.resolution}"
+                )
+            if step is not None and abs(step - s.microstep_m) > 1e-6 * step:
+                raise LimitError(
+                    f"{name}: bench file microstep {s.microstep_m * 1e6:.6g} um disagrees with "
+                    f"{s.model} at resolution {resolution} ({step * 1e6:.6g} um)"
+                )
+            step = s.microstep_m
+        if step is None:
+            raise LimitError(
+                f"{name}: name the stage model (e.g. 'X-LSM500A') or its microstep "
+                "(e.g. '0.047625 um') in the bench file before it moves"
+            )
+        travel = ((lo_steps * step), (hi_steps * step))
+        if nominal_m is not None:
+            length = travel[1] - travel[0]
+            if not 0.9 * nominal_m <= length <= 1.1 * nominal_m + 0.01:
+                raise LimitError(
+                    f"{name}: the device's travel is {length * 1e3:.4g} mm with a "
+                    f"{step * 1e6:.6g} um microstep, {s.model} has {nominal_m * 1e3:.4g} mm: "
+                    "wrong model or microstep in the bench file?"
+                )
+        for i, p in enumerate(positions_m):
+            if not travel[0] <= p <= travel[1]:
+                raise LimitError(
+                    f"{name}: cylinder {i + 1} at {p * 1e3:.4f} mm is outside the device's "
+                    f"travel [{travel[0] * 1e3:.4f}, {travel[1] * 1e3:.4f}] mm"
+                )
+        self._microstep_m = step
+        self._device_limits_m = travel
+        self._identity = {
+            "device_id": device_id,
+            "model": s.model,
+            "resolution": resolution,
+            "microstep_m": step,
+            "travel_m": list(travel),
+        }
+        return dict(self._identity)
+
+    def identity(self) -> dict[str, Any]:
+        """Device id, model, resolution, microstep (m) and travel (m) as read at connect."""
+        if self._identity is None:
+            self.connect()
+        assert self._identity is not None
+        return dict(self._identity)
+
+    @property
+    def microstep_m(self) -> float:
+        """Length of one microstep (m), resolved at :meth:`connect`."""
+        if self._microstep_m is None:
+            self.connect()
+        assert self._microstep_m is not None
+        return self._microstep_m
+
+    def _steps(self, position_m: float) -> int:
+        return round(float(position_m) / self.microstep_m)
+
     # --- Stage interface ----------------------------------------------------------------
     def status(self) -> ZaberReply:
-        """The axis status (empty command)."""
-        return self.command("")
+        """The axis status (with the position as data)."""
+        return self.command("get pos")
 
     def is_homed(self) -> bool:
-        r = self.command("")
+        r = self.command("get pos")
         return r.flag != "WR"
 
     def home(self) -> None:
         """Home and block until idle (timeout ``home_timeout_s``)."""
+        _ = self.microstep_m  # identity checked before anything moves
         self.command("home")
         self._wait_idle("home", self.settings.home_timeout_s)
         self._ensure_speed()
@@ -197,25 +355,26 @@ class ZaberStage:
     def _ensure_speed(self) -> None:
         if not self._speed_set:
             s = self.settings
-            data = round(float(s.speed_m_per_s) / s.microstep_m * SPEED_UNIT)
+            data = round(float(s.speed_m_per_s) / self.microstep_m * SPEED_UNIT)
             self.command(f"set maxspeed {data}")
             self._speed_set = True
 
     def speed(self) -> float:
         """Current ``maxspeed`` in m/s."""
-        return self._get_int("maxspeed") / SPEED_UNIT * self.settings.microstep_m
+        return self._get_int("maxspeed") / SPEED_UNIT * self.microstep_m
 
     def position(self) -> float:
-        return self._get_int("pos") * self.settings.microstep_m
+        return self._get_int("pos") * self.microstep_m
 
     def limits(self) -> tuple[float, float]:
         """(low, high) m: device ``limit.min/max`` intersected with the soft limits."""
         if self._device_limits_m is None:
-            step = self.settings.microstep_m
-            self._device_limits_m = (
-                self._get_int("limit.min") * step,
-                self._get_int("limit.max") * step,
-            )
+            step = self.microstep_m
+            if self._device_limits_m is None:
+                self._device_limits_m = (
+                    self._get_int("limit.min") * step,
+                    self._get_int("limit.max") * step,
+                )
         lo, hi = self._device_limits_m
         if self.settings.soft_limits_m is not None:
             lo = max(lo, self.settings.soft_limits_m[0])
@@ -253,7 +412,7 @@ class ZaberStage:
                 here = pre
         self._move_abs(position_m, here)
         reached = self.position()
-        if abs(reached - position_m) > max(s.position_tolerance_m, s.microstep_m):
+        if abs(reached - position_m) > max(s.position_tolerance_m, self.microstep_m):
             raise StallError(
                 f"{self.transport.name}: reached {reached * 1e3:.4f} mm, target "
                 f"{position_m * 1e3:.4f} mm"
@@ -270,7 +429,7 @@ class ZaberStage:
         clock = self.settings.clock
         t_end = clock.now() + timeout_s
         while True:
-            r = self.command("")
+            r = self.command("get pos")
             if not r.busy:
                 return
             if clock.now() > t_end:
@@ -281,7 +440,7 @@ class ZaberStage:
             clock.sleep(self.settings.poll_interval_s)
 
     def stop(self) -> None:
-        """Decelerate to a stop (``stop``); does not check flags."""
+        """Decelerate to a stop (``stop``, no message id: any reply will do); flags not checked."""
         s = self.settings
         self.transport.query(f"/{s.device} {s.axis} stop")
 
@@ -297,7 +456,9 @@ class ZaberStage:
             "resource": self.transport.name,
             "device": s.device,
             "axis": s.axis,
-            "microstep_m": s.microstep_m,
+            "stage_model": s.model,
+            "microstep_m": self._microstep_m,
+            "identity": self._identity,
             "speed_m_per_s": s.speed_m_per_s,
             "approach_m": s.approach_m,
             "settle_s": s.settle_s,

@@ -35,11 +35,16 @@ def _per_volt(value: Any, dimension: str) -> float:
     return _pq(value.strip()[:-2], dimension)
 
 
+#: serial line speed of Zaber ASCII devices and the Polytec OFV-5000 as shipped (baud)
+SERIAL_BAUD_DEFAULT = 115200
+
+
 class GeneratorSpec(_Model):
     resource: str
     max_amplitude: Voltage = 10.0  # Vpp at the output
     sample_rate: SampleRate = 1.0e6
     timeout: Duration = 5.0
+    baud_rate: int | None = Field(default=None, gt=0)  # only for a serial (ASRL) resource
 
 
 class AmplifierSpec(_Model):
@@ -67,19 +72,37 @@ class VibrometerSpec(_Model):
     range: str = "VD-09 10mm/s/V"
     min_signal_level: float = Field(default=0.2, ge=0, le=1)
     timeout: Duration = 2.0
+    baud_rate: int = Field(default=SERIAL_BAUD_DEFAULT, gt=0)
+    #: RS-232 command table entries that differ on this controller (see instruments.polytec)
+    commands: dict[str, str | None] = Field(default_factory=dict)
 
 
 class StageSpec(_Model):
+    """The stage: ``model`` (e.g. ``X-LSM500A``) and/or ``microstep`` (with units, at
+    ``resolution`` microsteps per step) say how long a microstep is; checked at connect against
+    what the device reports (``get deviceid``, ``get resolution``, ``get limit.max``)."""
+
     resource: str
     soft_limits: tuple[Length, Length]
+    model: str | None = None
+    microstep: Length | None = None
+    resolution: int = Field(default=64, gt=0)
+    device_id: int | None = None
     speed: Velocity = 0.025
     settle: Duration = 0.2  # wait after each move (the simulated stage settles as long)
     timeout: Duration = 60.0
+    baud_rate: int = Field(default=SERIAL_BAUD_DEFAULT, gt=0)
 
     @model_validator(mode="after")
     def _order(self) -> StageSpec:
         if not self.soft_limits[0] < self.soft_limits[1]:
             raise ValueError("soft_limits must be [low, high] with low < high")
+        if self.model is None and self.microstep is None:
+            raise ValueError(
+                "name the stage 'model' (e.g. X-LSM500A) or its 'microstep' (e.g. 0.047625 um)"
+            )
+        if self.microstep is not None and not self.microstep > 0:
+            raise ValueError("microstep must be > 0")
         return self
 
 

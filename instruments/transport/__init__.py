@@ -31,13 +31,16 @@ def open_transport(
     *,
     name: str = "instrument",
     timeout_s: float = 5.0,
+    baud_rate: int | None = None,
     **settings: Any,
 ) -> Transport:
     """Open ``resource`` on pyvisa or pyserial.
 
-    ``settings`` go to :class:`~instruments.transport.visa.VisaTransport` (``backend``,
-    terminations) or :class:`~instruments.transport.serial_port.SerialTransport` (``baudrate``,
-    ``parity``...). An empty or unknown resource raises :class:`InstrumentError` naming it.
+    ``baud_rate`` sets the line speed of a serial port or of a VISA ``ASRL`` resource (VISA
+    defaults to 9600 baud; Zaber ASCII and the Polytec OFV-5000 ship at 115200; ``None``: the
+    transport's default). ``settings`` go to :class:`~instruments.transport.visa.VisaTransport`
+    (``backend``, terminations) or :class:`~instruments.transport.serial_port.SerialTransport`
+    (``parity``...). An empty or unknown resource raises :class:`InstrumentError` naming it.
     """
     if not isinstance(resource, str) or not resource.strip():
         raise InstrumentError(f"{name}: empty instrument resource {resource!r}")
@@ -46,7 +49,11 @@ def open_transport(
     if _is_visa(resource):
         from instruments.transport.visa import VisaTransport
 
-        return VisaTransport(resource, name=name, timeout_s=timeout_s, **settings)
+        return VisaTransport(
+            resource, name=name, timeout_s=timeout_s, baud_rate=baud_rate, **settings
+        )
     from instruments.transport.serial_port import SerialTransport
 
+    if baud_rate is not None:
+        settings["baudrate"] = baud_rate
     return SerialTransport(resource, name=name, timeout_s=timeout_s, **settings)

@@ -21,7 +21,7 @@ class SerialTransport:
     name:
         Instrument name used in error messages.
     timeout_s:
-        Per-read timeout in s.
+        Per-read timeout in s; setting it sets pyserial's read and write timeouts.
     baudrate, bytesize, parity, stopbits:
         Line settings (default 115200 8N1: Polytec OFV-5000 and Zaber ASCII).
     termination:
@@ -44,7 +44,7 @@ class SerialTransport:
         import serial
 
         self.name = f"{name} ({port})"
-        self.timeout_s = float(timeout_s)
+        self._timeout_s = float(timeout_s)
         self._term = termination.encode()
         factory = serial_factory or serial.serial_for_url
         try:
@@ -59,6 +59,26 @@ class SerialTransport:
             )
         except (serial.SerialException, ValueError) as exc:
             raise InstrumentError(f"{self.name}: cannot open serial port ({exc})") from None
+
+    @property
+    def timeout_s(self) -> float:
+        """Per-read timeout in s (sets the port's ``timeout`` and ``write_timeout``)."""
+        return self._timeout_s
+
+    @timeout_s.setter
+    def timeout_s(self, value: float) -> None:
+        self._timeout_s = float(value)
+        port = getattr(self, "_port", None)
+        if port is not None:
+            port.timeout = self._timeout_s
+            port.write_timeout = self._timeout_s
+
+    def clear(self) -> None:
+        """Drop whatever is waiting in the input buffer (a late reply)."""
+        try:
+            self._port.reset_input_buffer()
+        except Exception as exc:
+            raise InstrumentError(f"{self.name}: cannot clear the input ({exc})") from None
 
     def _send(self, what: str, payload: bytes) -> None:
         try:

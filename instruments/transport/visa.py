@@ -9,6 +9,8 @@ from instruments.transport.block import encode_block
 
 __all__ = ["VisaTransport"]
 
+_CHECK = "check that the instrument is on, its address in the bench file and the cable or network"
+
 
 class VisaTransport:
     """A :class:`~instruments.interfaces.Transport` on one pyvisa message-based resource.
@@ -25,6 +27,12 @@ class VisaTransport:
         pyvisa backend (``"@py"`` pyvisa-py; ``"@sim"`` pyvisa-sim; ``""`` the NI/Keysight VISA).
     read_termination, write_termination:
         Line terminations (default ``"\\n"``).
+    baud_rate:
+        Line speed of an ``ASRL`` (serial) resource; VISA's own default is 9600 baud.
+
+    A dead link (``ConnectionRefusedError``, ``BrokenPipeError``, any ``OSError`` or
+    ``VisaIOError`` that is not a timeout) becomes an :class:`InstrumentError` naming the
+    instrument, its resource and what to check.
     """
 
     def __init__(
@@ -36,6 +44,7 @@ class VisaTransport:
         backend: str = "@py",
         read_termination: str = "\n",
         write_termination: str = "\n",
+        baud_rate: int | None = None,
         resource_manager: Any = None,
     ) -> None:
         import pyvisa
@@ -53,10 +62,14 @@ class VisaTransport:
             res: Any = rm.open_resource(resource)
             self._res: Any = res
         except Exception as exc:  # pyvisa raises several types for a bad/unknown resource
-            raise InstrumentError(f"{self.name}: cannot open VISA resource ({exc})") from None
+            raise InstrumentError(
+                f"{self.name}: cannot open VISA resource ({exc}); {_CHECK}"
+            ) from None
         self.timeout_s = float(timeout_s)
         self._res.read_termination = read_termination
         self._res.write_termination = write_termination
+        if baud_rate is not None:
+            self._res.baud_rate = int(baud_rate)
         self._write_term = write_termination.encode()
 
     @property
@@ -79,7 +92,28 @@ class VisaTransport:
                 raise InstrumentTimeout(
                     f"{self.name}: no reply to {what!r} within {self.timeout_s:g} s"
                 ) from None
-            raise InstrumentError(f"{self.name}: {what!r} failed ({exc})") from None
+            raise InstrumentError(f"{self.name}: {what!r} failed ({exc}); {_CHECK}") from None
+        except OSError as exc:  # ConnectionRefusedError, BrokenPipeError, reset: a dead link
+            if isinstance(exc, TimeoutError):
+                raise InstrumentTimeout(
+                    f"{self.name}: no reply to {what!r} within {self.timeout_s:g} s"
+                ) from None
+            raise InstrumentError(
+                f"{self.name}: link lost at {what!r} ({type(exc).__name__}: {exc}); {_CHECK}"
+            ) from None
+
+    def clear(self) -> None:
+        """Device clear (IEEE 488.2 / VISA ``viClear``): the instrument drops its output queue
+        and pending input; anything still waiting here is flushed too."""
+        self._call("device clear", self._res.clear)
+        flush = getattr(self._res, "flush", None)
+        if flush is not None:
+            try:
+                import pyvisa.constants as vc
+
+                flush(vc.BufferOperation.discard_read_buffer_no_io)
+            except Exception:  # not every session has a read buffer to discard
+                pass
 
     def write(self, command: str) -> None:
         self._call(command, self._res.write, command)

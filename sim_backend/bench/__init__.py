@@ -4,7 +4,8 @@ Usage (the run engine's bench assembly does the same from a bench file)::
 
     world = SimWorld(SimWorldConfig(seed=1))
     gen = KeysightGenerator(world.transport("generator"), limits)   # the real driver
-    stage = ZaberStage(world.transport("stage"), ZaberSettings(clock=world.clock))
+    clock = world.clock
+    stage = ZaberStage(world.transport("stage"), ZaberSettings(model="X-LSM500A", clock=clock))
     daq = world.digitiser()
     world.faults.stage_stall = True                                  # fault injection
     world.dem_stats                                                  # DEM calls / hits / s

@@ -71,6 +71,9 @@ class WorldTransport:
         self._inst.sync(self._which)
         return self._inner.read()
 
+    def clear(self) -> None:
+        self._inner.clear()
+
     def close(self) -> None:
         self._inner.close()
 
@@ -199,10 +202,15 @@ def build_drivers(world: SimWorld) -> tuple[Any, Any, Any]:
     stage = ZaberStage(
         world.transport("stage"),
         ZaberSettings(
+            model=world._inst.stage.model,  # the emulated stage names itself
             speed_m_per_s=cfg.stage_speed_m_per_s,
             settle_s=cfg.stage_settle_s,
             soft_limits_m=cfg.stage_travel_m,
             clock=world.clock,
         ),
     )
+    # connect as on the rig: *CLS and identity, echo off, stage identity against the positions
+    generator.connect()
+    vibrometer.connect()
+    stage.connect([float(p) for p in world.cylinder_positions_m])
     return generator, vibrometer, stage

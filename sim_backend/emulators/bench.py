@@ -52,6 +52,8 @@ class EmulatedInstruments:
     ) -> tuple[KeysightGenerator, PolytecVibrometer, ZaberStage]:
         """The real drivers on the emulators; the stage polls on the simulated clock."""
         ss = replace(stage_settings or ZaberSettings(), clock=self.clock)
+        if ss.model is None and ss.microstep_m is None:
+            ss = replace(ss, model=self.stage.model)
         return (
             KeysightGenerator(self.generator_transport, limits),
             PolytecVibrometer(self.vibrometer_transport, vibrometer_settings),
@@ -64,7 +66,7 @@ def make_emulators(
     *,
     stage_travel_m: tuple[float, float] = (0.0, 0.5),
     stage_speed_m_per_s: float = 0.025,
-    microstep_m: float = 0.49609375e-6,
+    stage_model: str = "X-LSM500A",
     vibrometer_range: str = "VD-09 10mm/s/V",
     timeouts_s: tuple[float, float, float] = (5.0, 2.0, 2.0),
 ) -> EmulatedInstruments:
@@ -76,7 +78,7 @@ def make_emulators(
     gen = KeysightEmulator()
     vib = PolytecEmulator(range_name=vibrometer_range)
     stage = ZaberEmulator(
-        clk, microstep_m=microstep_m, travel_m=stage_travel_m, speed_m_per_s=stage_speed_m_per_s
+        clk, model=stage_model, travel_m=stage_travel_m, speed_m_per_s=stage_speed_m_per_s
     )
     return EmulatedInstruments(
         clk,

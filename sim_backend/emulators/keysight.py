@@ -3,7 +3,11 @@
 State the simulated world reads: :attr:`KeysightEmulator.channels` (``ChannelState`` per channel:
 normalised waveform samples ``[n]``, arb sample rate, amplitude Vpp, offset, load, output,
 burst and trigger settings). Hooks: :attr:`trigger_hooks` (called with the tuple of channels
-that fire on ``*TRG``), :attr:`responsive` (False: stops answering), :meth:`push_error`.
+that fire on ``*TRG``), :attr:`responsive` (False: stops answering), :meth:`push_error`,
+:attr:`late_replies` (the next n query replies miss their timeout and arrive just before the
+following reply, as from an instrument that stalled), :meth:`clear` (device clear: the output
+queue, late replies included, is dropped; the error queue is kept, as IEEE 488.2 says).
+The arbitrary waveform of ``n`` points is played in ``n / SRAT`` s (point ``k`` at ``k / SRAT``).
 """
 
 from __future__ import annotations
@@ -85,6 +89,8 @@ class KeysightEmulator:
         self.trigger_hooks: list[Callable[[tuple[int, ...]], None]] = []
         self.n_triggers = 0
         self.commands: list[str] = []
+        self.late_replies = 0
+        self._held: list[str] = []
 
     # --- hooks for the world ------------------------------------------------------------
     def push_error(self, code: int, message: str) -> None:
@@ -100,8 +106,24 @@ class KeysightEmulator:
             n for n, c in self.channels.items() if c.burst_on and c.trigger_source == "BUS"
         )
 
+    def clear(self) -> None:
+        """Device clear: drop the output queue (late replies too)."""
+        self._held.clear()
+
     # --- wire ---------------------------------------------------------------------------
     def handle(self, message: bytes) -> str | None:
+        """One message in; the reply line(s) out (a late reply first, on its own line)."""
+        reply = self._handle(message)
+        if reply is None:
+            return None
+        if self.late_replies > 0:
+            self.late_replies -= 1
+            self._held.append(reply)
+            return None
+        lines, self._held = [*self._held, reply], []
+        return "\n".join(lines)
+
+    def _handle(self, message: bytes) -> str | None:
         block: bytes | None = None
         i = message.find(b"#")
         if i >= 0 and b"DATA" in message[:i].upper():

@@ -1,47 +1,63 @@
-"""Emulated Polytec OFV-5000 controller + OFV-534 head (``Get``/``Set``/``GetDevInfo`` grammar).
+"""Emulated Polytec OFV-5000 controller with an OFV-534 head and a VD-09 velocity decoder.
 
-Names follow :class:`instruments.polytec.PolytecSettings` defaults. State for the world:
-:attr:`range_name`, :meth:`sensitivity_m_per_s_per_V`, :attr:`signal_level` (0..1, settable;
-the world sets it from the spot position), :attr:`delay_s`, :attr:`bandwidth_Hz`. Faults:
+Written from Polytec's RS-232 interface description of the OFV-5000 (as public drivers use it),
+not from this project's driver: ``Get,<Device>,<n>,<Item>`` answers the value,
+``Set,<Device>,<n>,<Item>,<Value>`` answers nothing, ``GetDevInfo,...`` lists the choices.
+Devices: ``Controller,0`` (Name, Version), ``SensorHead,0`` (Name, AutoFocus ``Search`` ->
+AutoFocusResult ``Found``), ``Interface,0`` (Echo ``On``/``Off``, BaudRate 115200) and the
+velocity decoder ``VeloDec,1`` (Name ``VD-09``, Range ``50mm/s/V``, MaxFreq, SignalDelay).
+With echo on (:attr:`echo`, on by default here: the strict case) every received line is sent
+back before any reply. An item that does not exist answers ``Not Available``.
+The signal level (``Get,SensorHead,0,SignalLevel``, 0..100) is this emulator's assumption.
+
+State for the world: :attr:`range_name` (``"VD-09 50mm/s/V"``), :attr:`delay_s`,
+:meth:`sensitivity_m_per_s_per_V`, :attr:`signal_level` (0..1, settable). Faults:
 :meth:`lose_signal`, :attr:`responsive`.
 """
 
 from __future__ import annotations
 
-from instruments.polytec import parse_sensitivity
+import re
 
-__all__ = ["DEFAULT_RANGES", "PolytecEmulator"]
+__all__ = ["BAUD_RATE", "VD09_RANGES", "PolytecEmulator"]
 
-#: range name -> signal delay (s) of the decoder
-DEFAULT_RANGES: dict[str, float] = {
-    "VD-09 1mm/s/V": 7.3e-6,
-    "VD-09 5mm/s/V": 7.3e-6,
-    "VD-09 10mm/s/V": 7.3e-6,
-    "VD-09 50mm/s/V": 7.3e-6,
-    "VD-09 100mm/s/V": 7.3e-6,
+BAUD_RATE = 115200
+#: VD-09 ranges: value -> (sensitivity (m/s)/V, max frequency Hz); signal delay 7.3 us
+VD09_RANGES: dict[str, tuple[float, float]] = {
+    "1mm/s/V": (1e-3, 100e3),
+    "2mm/s/V": (2e-3, 250e3),
+    "5mm/s/V": (5e-3, 500e3),
+    "10mm/s/V": (10e-3, 1.5e6),
+    "20mm/s/V": (20e-3, 1.5e6),
+    "50mm/s/V": (50e-3, 2.5e6),
+    "100mm/s/V": (100e-3, 2.5e6),
 }
+VD09_DELAY_S = 7.3e-6
+NOT_AVAILABLE = "Not Available"
 
 
 class PolytecEmulator:
-    """Answers ``Get,<dev>,<n>,<prop>`` with the value, ``Set`` silently, errors ``Error ...``."""
+    """One controller: ``handle(line)`` -> reply line(s) or None."""
 
     def __init__(
         self,
         *,
         range_name: str = "VD-09 10mm/s/V",
-        ranges: dict[str, float] | None = None,
-        bandwidth_Hz: float = 100e3,
-        level_full_scale: float = 100.0,
+        decoder_index: int = 1,
+        echo: bool = True,
         controller: str = "OFV-5000",
         head: str = "OFV-534",
     ) -> None:
-        self.ranges = dict(ranges or DEFAULT_RANGES)
-        if range_name not in self.ranges:
-            self.ranges[range_name] = 7.3e-6
-        self.range_name = range_name
-        self.bandwidth_Hz = bandwidth_Hz
-        self.level_full_scale = level_full_scale
+        decoder, _, value = range_name.partition(" ")
+        if decoder != "VD-09" or value.replace(" ", "") not in VD09_RANGES:
+            raise ValueError(f"emulated VD-09 has no range {range_name!r}")
+        self.decoder = decoder
+        self.range_value = value.replace(" ", "")
+        self.decoder_index = decoder_index
+        self.echo = echo
         self.signal_level = 0.8
+        #: the decoder's signal delay (s), settable
+        self.decoder_delay_s = VD09_DELAY_S
         self.controller = controller
         self.head = head
         self.autofocus_count = 0
@@ -49,43 +65,65 @@ class PolytecEmulator:
         self.commands: list[str] = []
 
     @property
+    def range_name(self) -> str:
+        return f"{self.decoder} {self.range_value}"
+
+    @property
     def delay_s(self) -> float:
-        return self.ranges[self.range_name]
+        return self.decoder_delay_s
 
     def sensitivity_m_per_s_per_V(self) -> float:
-        return parse_sensitivity(self.range_name)
+        return VD09_RANGES[self.range_value][0]
 
     def lose_signal(self) -> None:
         self.signal_level = 0.0
 
-    def _get(self, dev: str, prop: str) -> str:
-        if dev == "VelocityDecoder":
-            if prop == "Range":
-                return self.range_name
-            if prop == "LowPassFilter":
-                return f"{self.bandwidth_Hz / 1e3:g}kHz"
-            if prop == "SignalDelay":
-                return f"{self.delay_s * 1e6:g}us"
-        if dev == "SensorHead" and prop == "SignalLevel":
-            return f"{round(self.signal_level * self.level_full_scale):d}"
-        return "Error: unknown property"
+    def _item(self, device: str, index: str, item: str) -> str | None:
+        """The value of one item, None when there is no such item."""
+        if device == "Controller" and index == "0":
+            return {"Name": self.controller, "Version": "2.4"}.get(item)
+        if device == "SensorHead" and index == "0":
+            if item == "SignalLevel":
+                return str(round(self.signal_level * 100))
+            return {"Name": self.head, "Version": "1.1", "AutoFocusResult": "Found"}.get(item)
+        if device == "Interface" and index == "0":
+            return {"Name": "RS-232", "Echo": "On" if self.echo else "Off"}.get(
+                item, str(BAUD_RATE) if item == "BaudRate" else None
+            )
+        if device == "VeloDec" and index == str(self.decoder_index):
+            if item == "Name":
+                return self.decoder
+            if item == "Range":
+                return self.range_value
+            if item == "MaxFreq":
+                return f"{VD09_RANGES[self.range_value][1] / 1e3:g}kHz"
+            if item == "SignalDelay":
+                return f"{self.decoder_delay_s * 1e6:g}us"
+        return None
+
+    def _set(self, device: str, index: str, item: str, value: str) -> None:
+        if device == "Interface" and index == "0" and item == "Echo" and value in ("On", "Off"):
+            self.echo = value == "On"
+        elif device == "VeloDec" and index == str(self.decoder_index) and item == "Range":
+            if re.sub(r"\s", "", value) in VD09_RANGES:
+                self.range_value = re.sub(r"\s", "", value)
+        elif device == "SensorHead" and index == "0" and item == "AutoFocus" and value == "Search":
+            self.autofocus_count += 1
 
     def handle(self, message: bytes) -> str | None:
         text = message.decode("ascii", "replace").strip()
         self.commands.append(text)
+        echoed = [text] if self.echo else []  # the echo setting as it was when the line came in
         parts = [p.strip() for p in text.split(",")]
-        verb = parts[0]
-        if verb == "GetDevInfo" and len(parts) == 4 and parts[3] == "Name":
-            return {"Controller": self.controller, "SensorHead": self.head}.get(
-                parts[1], "Error: unknown device"
-            )
-        if verb == "Get" and len(parts) == 4:
-            return self._get(parts[1], parts[3])
-        if verb == "Set" and len(parts) == 5:
-            dev, prop, value = parts[1], parts[3], parts[4]
-            if dev == "VelocityDecoder" and prop == "Range" and value in self.ranges:
-                self.range_name = value
-            elif dev == "SensorHead" and prop == "AutoFocus" and value == "Start":
-                self.autofocus_count += 1
-            return None
-        return "Error: syntax"
+        reply: str | None = None
+        if parts[0] == "Get" and len(parts) == 4:
+            reply = self._item(parts[1], parts[2], parts[3]) or NOT_AVAILABLE
+        elif parts[0] == "GetDevInfo" and len(parts) == 4:
+            value = self._item(parts[1], parts[2], parts[3])
+            reply = NOT_AVAILABLE if value is None else value
+        elif parts[0] == "Set" and len(parts) == 5:
+            self._set(parts[1], parts[2], parts[3], parts[4])
+        else:
+            reply = NOT_AVAILABLE
+        lines = echoed + ([reply] if reply is not None else [])
+        return "\n".join(lines) if lines else None

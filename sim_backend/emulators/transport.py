@@ -25,6 +25,9 @@ class SimTransport:
     A query that gets no reply (emulator silent or not responsive) raises
     :class:`InstrumentTimeout` after ``clock.sleep(timeout_s)`` (simulated time passes as it
     would on the bench; any clock with ``now``/``sleep`` works, e.g. :class:`SimClock`).
+    A reply of several lines (late replies arriving before the current one) is read line by
+    line: the query returns the first, :meth:`read` the next. :meth:`clear` is a device clear
+    (pending lines dropped, the emulator's ``clear()`` called when it has one).
     """
 
     def __init__(
@@ -58,19 +61,28 @@ class SimTransport:
     def write(self, command: str) -> None:
         reply = self._send(command.encode("ascii"), command)
         if reply is not None:
-            self._pending.append(reply)
+            self._pending.extend(reply.split("\n"))
 
     def query(self, command: str) -> str:
         self._pending.clear()
         reply = self._send(command.encode("ascii"), command)
         if reply is None:
             raise self._timeout(command)
-        return reply
+        first, *rest = reply.split("\n")
+        self._pending.extend(rest)
+        return first
 
     def write_block(self, header: str, data: bytes) -> None:
         reply = self._send(header.encode("ascii") + encode_block(data), header)
         if reply is not None:
-            self._pending.append(reply)
+            self._pending.extend(reply.split("\n"))
+
+    def clear(self) -> None:
+        """Device clear: drop what is waiting on both ends."""
+        self._pending.clear()
+        clear = getattr(self.emulator, "clear", None)
+        if clear is not None and self.emulator.responsive:
+            clear()
 
     def read(self) -> str:
         if self._pending and self.emulator.responsive:

@@ -1,15 +1,30 @@
 """Emulated Zaber axis (ASCII protocol): moves take simulated time on a shared :class:`SimClock`.
 
+Written from Zaber's ASCII protocol manual: ``/<device> <axis> [<message id>] <command>``, reply
+``@<device> <axis> [<id>] <OK|RJ> <IDLE|BUSY> <flag> <data>`` (the id echoed when one was sent).
+The microstep is the device's own: full-step length / ``resolution`` (default 64), e.g. 0.047625
+um on an X-LSM; ``get deviceid``, ``get resolution``, ``get limit.min/max`` answer as the device.
+Serial line as shipped: 115200 baud, 8N1 (:attr:`BAUD_RATE`).
+
 State for the world: :meth:`ZaberEmulator.position_m` (at the clock's time), :attr:`homed`,
 :meth:`busy`. Faults: :meth:`stall` (stops the axis, flag FS), :meth:`lose_homing` (flag WR),
-:attr:`responsive`.
+:attr:`responsive`, :attr:`late_replies` (the next n replies miss their request's timeout and
+arrive just before the reply to the following command, as after a stall of the link).
 """
 
 from __future__ import annotations
 
 from instruments.clock import Clock
 
-__all__ = ["ZaberEmulator"]
+__all__ = ["STAGE_MODELS", "ZaberEmulator"]
+
+BAUD_RATE = 115200
+#: model -> (device id, full-step length m). The device ids are placeholders of this emulator,
+#: not Zaber's numbers; the full step is the datasheet's (X-LSM: 3.048 um = 64 x 0.047625 um).
+STAGE_MODELS: dict[str, tuple[int, float]] = {
+    "X-LSM500A": (50500, 3.048e-6),
+    "X-LSM200A": (50200, 3.048e-6),
+}
 
 
 class ZaberEmulator:
@@ -21,7 +36,8 @@ class ZaberEmulator:
         *,
         device: int = 1,
         axis: int = 1,
-        microstep_m: float = 0.49609375e-6,
+        model: str = "X-LSM500A",
+        resolution: int = 64,
         travel_m: tuple[float, float] = (0.0, 0.5),
         speed_m_per_s: float = 0.025,
         home_position_m: float | None = None,
@@ -29,7 +45,13 @@ class ZaberEmulator:
         self.clock = clock
         self.device = device
         self.axis = axis
+        self.model = model
+        self.device_id, full_step_m = STAGE_MODELS[model]
+        self.resolution = int(resolution)
+        microstep_m = full_step_m / self.resolution
         self.microstep_m = microstep_m
+        self.late_replies = 0
+        self._held: list[str] = []
         self.limit_min = round(float(travel_m[0]) / microstep_m)
         self.limit_max = round(float(travel_m[1]) / microstep_m)
         self.maxspeed = round(float(speed_m_per_s) / microstep_m * 1.6384)
@@ -46,6 +68,7 @@ class ZaberEmulator:
         self._t0 = 0.0
         self._t1 = 0.0
         self.commands: list[str] = []
+        self._id: int | None = None
 
     # --- state for the world ------------------------------------------------------------
     def _steps_now(self) -> float:
@@ -89,11 +112,26 @@ class ZaberEmulator:
     # --- wire -----------------------------------------------------------------------------
     def _reply(self, ok: bool, data: str) -> str:
         status = "BUSY" if self.busy() else "IDLE"
-        return f"@{self.device:02d} {self.axis} {'OK' if ok else 'RJ'} {status} {self.flag} {data}"
+        mid = "" if self._id is None else f"{self._id} "
+        verdict = "OK" if ok else "RJ"
+        return f"@{self.device:02d} {self.axis} {mid}{verdict} {status} {self.flag} {data}"
 
     def handle(self, message: bytes) -> str | None:
+        """One request line in; the reply line(s) out (several when late ones arrive first)."""
+        reply = self._handle(message)
+        if reply is None:
+            return None
+        if self.late_replies > 0:  # this one misses its request's timeout
+            self.late_replies -= 1
+            self._held.append(reply)
+            return None
+        lines, self._held = [*self._held, reply], []
+        return "\n".join(lines)
+
+    def _handle(self, message: bytes) -> str | None:
         text = message.decode("ascii", "replace").strip()
         self.commands.append(text)
+        self._id = None
         if not text.startswith("/"):
             return None
         parts = text[1:].split()
@@ -104,9 +142,15 @@ class ZaberEmulator:
             return None
         if dev not in (0, self.device):
             return None
+        words = parts[2:]
+        if words and words[0].isdigit():  # message id 0..99
+            self._id = int(words[0])
+            words = words[1:]
+            if not 0 <= self._id <= 99:
+                self._id = None
+                return self._reply(False, "BADMESSAGEID")
         if axis not in (0, self.axis):
             return self._reply(False, "BADAXIS")
-        words = parts[2:]
         if not words:
             return self._reply(True, "0")
         cmd = words[0]
@@ -143,6 +187,8 @@ class ZaberEmulator:
                 "maxspeed": self.maxspeed,
                 "limit.min": self.limit_min,
                 "limit.max": self.limit_max,
+                "deviceid": self.device_id,
+                "resolution": self.resolution,
             }.get(words[1])
             if value is None:
                 return self._reply(False, "BADCOMMAND")

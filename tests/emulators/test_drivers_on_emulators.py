@@ -50,7 +50,9 @@ def test_generator_state_and_trigger_hook(clock: SimClock) -> None:
     assert not ch.output_on
     expected = np.rint(burst_samples(CFG.shape, CFG.sample_rate_Hz) * 32767) / 32767
     np.testing.assert_allclose(ch.waveform, expected, atol=1e-12)
-    assert (ch.sample_rate_Hz, ch.amplitude_Vpp, ch.offset_V) == (1.0e6, 4.0, 0.1)
+    played = (expected.size - 1) / CFG.shape.duration_s  # n points span the window T
+    assert ch.sample_rate_Hz == pytest.approx(played, rel=1e-9)
+    assert (ch.amplitude_Vpp, ch.offset_V) == (4.0, 0.1)
     assert ch.load_ohm == np.inf and ch.burst_on and ch.burst_cycles == 1
     assert ch.trigger_source == "BUS" and emu.trigger_out_on and emu.trigger_out_source == 2
     gen.output(2, True)
@@ -92,7 +94,7 @@ def test_generator_error_injection_and_silence(clock: SimClock) -> None:
     t0 = clock.now()
     with pytest.raises(InstrumentTimeout, match=r"generator: no reply to '\*OPC\?' within 2 s"):
         gen.wait_complete()
-    assert clock.now() == pytest.approx(t0 + 2.0)
+    assert clock.now() == pytest.approx(t0 + 4.0)  # the query, then *OPC? after a device clear
     gen.safe_state()  # dead link: logs, does not raise
 
 
@@ -105,7 +107,7 @@ def test_vibrometer_on_emulator(clock: SimClock) -> None:
     snap = vib.snapshot()
     assert snap["sensitivity_m_per_s_per_V"] == pytest.approx(0.05)
     assert snap["signal_delay_s"] == pytest.approx(7.3e-6)
-    assert snap["bandwidth_Hz"] == pytest.approx(100e3)
+    assert snap["bandwidth_Hz"] == pytest.approx(2.5e6)  # the VD-09's MaxFreq at 50mm/s/V
     assert snap["identity"] == "OFV-5000 / OFV-534"
     emu.signal_level = 0.5
     assert vib.check_signal() == pytest.approx(0.5)
@@ -113,13 +115,13 @@ def test_vibrometer_on_emulator(clock: SimClock) -> None:
     with pytest.raises(SignalLostError):
         vib.check_signal()
     with pytest.raises(ReplyError, match="reads back"):
-        vib.set_velocity_range("VD-09 2mm/s/V")  # not a range of this decoder
+        vib.set_velocity_range("VD-09 3mm/s/V")  # not a range of this decoder
     assert vib.autofocus() and emu.autofocus_count == 1
 
 
 def make_stage(clock: SimClock, **kw: object) -> tuple[ZaberStage, ZaberEmulator]:
-    emu = ZaberEmulator(clock, travel_m=(0.0, 0.3))
-    s = ZaberSettings(clock=clock, soft_limits_m=(0.005, 0.25), **kw)  # type: ignore[arg-type]
+    emu = ZaberEmulator(clock, travel_m=(0.0, 0.3), model="X-LSM200A")
+    s = ZaberSettings(clock=clock, soft_limits_m=(0.005, 0.25), microstep_m=0.047625e-6, **kw)  # type: ignore[arg-type]
     return ZaberStage(SimTransport(emu, "stage", 1.0, clock), s), emu
 
 
@@ -136,7 +138,7 @@ def test_stage_moves_take_simulated_time(clock: SimClock) -> None:
     assert emu.position_m() == pytest.approx(0.1, abs=1e-6)
     assert clock.now() - t0 == pytest.approx(0.1 / 0.025 + 0.2, abs=0.1)  # travel + settle
     stage.move_to(0.05)  # from above: overshoots below, approaches upwards
-    assert any(c.startswith("/1 1 move abs") for c in emu.commands)
+    assert any(c.startswith("/1 1 ") and " move abs " in c for c in emu.commands)
     assert stage.position() == pytest.approx(0.05, abs=1e-6)
     assert stage.speed() == pytest.approx(0.025, rel=1e-3)
 
@@ -170,7 +172,7 @@ def test_stage_move_timeout_stops_axis(clock: SimClock) -> None:
 def test_make_emulators_opens_all_drivers() -> None:
     from sim_backend.emulators import make_emulators
 
-    emus = make_emulators(stage_travel_m=(0.0, 0.3))
+    emus = make_emulators(stage_travel_m=(0.0, 0.5))
     gen, vib, stage = emus.drivers(LIMITS, ZaberSettings(soft_limits_m=(0.01, 0.2)))
     assert gen.identify().startswith("Keysight")
     assert vib.sensitivity_m_per_s_per_V() == pytest.approx(0.01)

@@ -18,8 +18,18 @@ NO_ERR = ("SYST:ERR?", '+0,"No error"')
 CFG = BurstConfig(Burst(8920.0, cycles=5.0), amplitude_Vpp=4.0, sample_rate_Hz=1.0e6)
 
 
+def played_rate(n_points: int, config: BurstConfig = CFG) -> float:
+    """The arb rate at which n points span the burst's window (point k at k / SRAT)."""
+    return (n_points - 1) / config.shape.duration_s
+
+
+def srat_readback(ch: int, n_bytes: int) -> tuple[str, str]:
+    return (f"SOUR{ch}:FUNC:ARB:SRAT?", f"{played_rate(n_bytes // 2):+.9E}")
+
+
 def config_script(ch: int, n_bytes: int) -> list[tuple[str, str | BaseException | None]]:
     head = f"#{len(str(n_bytes))}{n_bytes}"
+    rate = played_rate(n_bytes // 2)
     return [
         (f"OUTP{ch} OFF", None),
         (f"SOUR{ch}:DATA:VOL:CLE", None),
@@ -27,7 +37,7 @@ def config_script(ch: int, n_bytes: int) -> list[tuple[str, str | BaseException 
         (f"SOUR{ch}:DATA:ARB:DAC BIAFC{ch},{head}<{n_bytes} bytes>", None),
         (f"SOUR{ch}:FUNC ARB", None),
         (f"SOUR{ch}:FUNC:ARB BIAFC{ch}", None),
-        (f"SOUR{ch}:FUNC:ARB:SRAT 1000000", None),
+        (f"SOUR{ch}:FUNC:ARB:SRAT {rate:.12g}", None),
         (f"OUTP{ch}:LOAD INF", None),
         (f"SOUR{ch}:VOLT:LIM:HIGH 5", None),
         (f"SOUR{ch}:VOLT:LIM:LOW -5", None),
@@ -47,7 +57,7 @@ def config_script(ch: int, n_bytes: int) -> list[tuple[str, str | BaseException 
 def test_configure_burst_exact_sequence_and_block_bytes() -> None:
     samples = burst_samples(CFG.shape, CFG.sample_rate_Hz)
     n_bytes = 2 * samples.size
-    t = ScriptedTransport([*config_script(2, n_bytes), NO_ERR])
+    t = ScriptedTransport([*config_script(2, n_bytes), NO_ERR, srat_readback(2, n_bytes)])
     gen = KeysightGenerator(t, LIMITS)
     gen.configure_burst(2, CFG)
     assert t.done
@@ -63,7 +73,7 @@ def test_configure_burst_exact_sequence_and_block_bytes() -> None:
 
 def test_output_trigger_and_opc() -> None:
     samples = burst_samples(CFG.shape, CFG.sample_rate_Hz)
-    script = [*config_script(1, 2 * samples.size), NO_ERR]
+    script = [*config_script(1, 2 * samples.size), NO_ERR, srat_readback(1, 2 * samples.size)]
     script += [("OUTP1 ON", None), NO_ERR, ("OUTP:TRIG:SOUR CH1", None)]
     script += [("*TRG", None), ("*OPC?", "1")]
     t = ScriptedTransport(script)
@@ -144,7 +154,7 @@ def test_malformed_replies_are_clear_errors() -> None:
 
 
 def test_no_reply_times_out_naming_command_and_safe_state_never_raises() -> None:
-    t = ScriptedTransport([("*OPC?", None)], name="generator (TCPIP::x::INSTR)")
+    t = ScriptedTransport([("*OPC?", None), ("*OPC?", "1")], name="generator (TCPIP::x::INSTR)")
     gen = KeysightGenerator(t, LIMITS)
     with pytest.raises(
         InstrumentTimeout, match=r"generator \(TCPIP::x::INSTR\): no reply to '\*OPC\?'"

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from instruments.errors import InstrumentTimeout, ReplyError, SignalLostError
+from instruments.errors import InstrumentTimeout, LimitError, ReplyError, SignalLostError
 from instruments.polytec import (
     PolytecSettings,
     PolytecVibrometer,
@@ -36,27 +36,49 @@ def test_bad_range_and_values() -> None:
         parse_si_value("lots", "Hz")
 
 
-def test_identify_range_set_and_readback() -> None:
+def test_connect_identify_range_set_and_readback() -> None:
     t = ScriptedTransport(
         [
-            ("GetDevInfo,Controller,0,Name", "OFV-5000"),
-            ("GetDevInfo,SensorHead,0,Name", "OFV-534"),
-            ("Set,VelocityDecoder,0,Range,VD-09 5mm/s/V", None),
-            ("Get,VelocityDecoder,0,Range", "VD-09 5mm/s/V"),
-            ("Get,VelocityDecoder,0,Range", "VD-09 5mm/s/V"),
+            ("Set,Interface,0,Echo,Off", None),
+            ("Get,Interface,0,Echo", "Off"),
+            ("Get,Controller,0,Name", "OFV-5000"),
+            ("Get,SensorHead,0,Name", "OFV-534"),
+            ("Get,Controller,0,Version", "2.4"),
+            ("Get,VeloDec,1,Name", "VD-09"),
+            ("Set,VeloDec,1,Range,5mm/s/V", None),
+            ("Get,VeloDec,1,Range", "5mm/s/V"),
+            ("Get,VeloDec,1,Range", "5mm/s/V"),
         ]
     )
     v = PolytecVibrometer(t)
-    assert v.identify() == "OFV-5000 / OFV-534"
+    assert v.connect() == "OFV-5000 / OFV-534"
     v.set_velocity_range("VD-09 5mm/s/V")
     assert v.sensitivity_m_per_s_per_V() == pytest.approx(5e-3)
     assert t.done
 
 
-def test_property_names_are_settings() -> None:
-    s = PolytecSettings(decoder_device="VD-09", decoder_index=1, delay_property="Delay")
-    t = ScriptedTransport([("Get,VD-09,1,Delay", "12us")])
+def test_command_table_entries_are_overridable() -> None:
+    s = PolytecSettings(commands={"signal_delay_get": "Get,VeloDec,0,SignalDelay"})
+    t = ScriptedTransport([("Get,VeloDec,0,SignalDelay", "12 us")])
     assert PolytecVibrometer(t, s).signal_delay_s() == pytest.approx(12e-6)
+    with pytest.raises(LimitError, match="unknown entries \\['range'\\]"):
+        PolytecSettings(commands={"range": "Get,X,0,Range"})
+
+
+def test_wrong_decoder_and_failed_readback_are_refused() -> None:
+    t = ScriptedTransport(
+        [
+            ("Get,VeloDec,1,Name", "VD-08"),
+            ("Get,VeloDec,1,Name", "VD-09"),
+            ("Set,VeloDec,1,Range,2mm/s/V", None),
+            ("Get,VeloDec,1,Range", "5mm/s/V"),
+        ]
+    )
+    v = PolytecVibrometer(t)
+    with pytest.raises(ReplyError, match=r"asks for decoder VD-09.*'VD-08'"):
+        v.set_velocity_range("VD-09 10mm/s/V")
+    with pytest.raises(ReplyError, match="reads back '5mm/s/V'"):
+        v.set_velocity_range("VD-09 2mm/s/V")
 
 
 def test_signal_level_and_loss() -> None:
@@ -71,12 +93,12 @@ def test_signal_level_and_loss() -> None:
 
 def test_errors_and_timeouts() -> None:
     t = ScriptedTransport(
-        [("Get,VelocityDecoder,0,Range", "Error: unknown"), ("Get,SensorHead,0,SignalLevel", None)],
+        [("Get,VeloDec,1,Range", "Not Available"), ("Get,SensorHead,0,SignalLevel", None)],
         name="vibrometer",
     )
     v = PolytecVibrometer(t)
-    with pytest.raises(ReplyError, match="answered 'Error: unknown'"):
-        v.velocity_range()
+    with pytest.raises(ReplyError, match="answered 'Not Available'"):
+        v.sensitivity_m_per_s_per_V()
     with pytest.raises(
         InstrumentTimeout, match="vibrometer: no reply to 'Get,SensorHead,0,SignalLevel'"
     ):

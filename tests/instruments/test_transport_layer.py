@@ -48,3 +48,18 @@ def test_factory_refuses_bad_arguments() -> None:
         open_transport("loop://", name="x", timeout_s=0.0)
     with pytest.raises(InstrumentError, match="empty instrument resource"):
         open_transport("", name="x")
+
+
+def test_serial_timeout_sets_pyserial_timeout_and_baud_rate_reaches_the_port() -> None:
+    t = open_transport("loop://", name="stage", timeout_s=0.05, baud_rate=115200)
+    assert isinstance(t, SerialTransport)
+    port = t._port
+    assert port.baudrate == 115200 and port.timeout == 0.05
+    t.timeout_s = 0.3  # e.g. the generator's longer wait for *OPC?
+    assert (port.timeout, port.write_timeout) == (0.3, 0.3)
+    t.write("late line")
+    t.clear()  # a late reply is dropped
+    with pytest.raises(InstrumentTimeout):
+        t.timeout_s = 0.01
+        t.read()
+    t.close()

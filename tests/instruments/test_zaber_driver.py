@@ -26,13 +26,20 @@ class FakeClock:
 
 def settings(**kw: object) -> ZaberSettings:
     base = dict(
-        microstep_m=STEP, soft_limits_m=(0.01, 0.2), clock=FakeClock(), approach_m=0.0, settle_s=0.1
+        microstep_m=STEP,
+        soft_limits_m=(0.01, 0.2),
+        clock=FakeClock(),
+        approach_m=0.0,
+        settle_s=0.1,
+        message_ids=False,
     )
     base.update(kw)
     return ZaberSettings(**base)  # type: ignore[arg-type]
 
 
-LIMITS = [
+LIMITS = [  # what connect() reads before the first move
+    ("/1 1 get deviceid", "@01 1 OK IDLE -- 50500"),
+    ("/1 1 get resolution", "@01 1 OK IDLE -- 64"),
     ("/1 1 get limit.min", "@01 1 OK IDLE -- 0"),
     ("/1 1 get limit.max", "@01 1 OK IDLE -- 300000"),
 ]
@@ -64,7 +71,7 @@ def test_move_out_of_limits_refused_before_moving() -> None:
 
 
 def test_move_refused_when_not_homed() -> None:
-    t = ScriptedTransport([*LIMITS, ("/1 1", "@01 1 OK IDLE WR 0")])
+    t = ScriptedTransport([*LIMITS, ("/1 1 get pos", "@01 1 OK IDLE WR 0")])
     with pytest.raises(NotHomedError, match="not homed"):
         ZaberStage(t, settings()).move_to(0.05)
     assert t.done
@@ -75,12 +82,12 @@ def test_move_polls_until_idle_then_settles() -> None:
     t = ScriptedTransport(
         [
             *LIMITS,
-            ("/1 1", "@01 1 OK IDLE -- 0"),
+            ("/1 1 get pos", "@01 1 OK IDLE -- 0"),
             ("/1 1 set maxspeed 40960", "@01 1 OK IDLE -- 0"),
             ("/1 1 get pos", "@01 1 OK IDLE -- 20000"),
             ("/1 1 move abs 50000", "@01 1 OK BUSY -- 0"),
-            ("/1 1", "@01 1 OK BUSY -- 0"),
-            ("/1 1", "@01 1 OK IDLE -- 0"),
+            ("/1 1 get pos", "@01 1 OK BUSY -- 0"),
+            ("/1 1 get pos", "@01 1 OK IDLE -- 0"),
             ("/1 1 get pos", "@01 1 OK IDLE -- 50000"),
         ]
     )
@@ -94,13 +101,13 @@ def test_same_side_approach_from_below() -> None:
     t = ScriptedTransport(
         [
             *LIMITS,
-            ("/1 1", "@01 1 OK IDLE -- 0"),
+            ("/1 1 get pos", "@01 1 OK IDLE -- 0"),
             ("/1 1 set maxspeed 40960", "@01 1 OK IDLE -- 0"),
             ("/1 1 get pos", "@01 1 OK IDLE -- 100000"),
             ("/1 1 move abs 49000", "@01 1 OK BUSY -- 0"),
-            ("/1 1", "@01 1 OK IDLE -- 0"),
+            ("/1 1 get pos", "@01 1 OK IDLE -- 0"),
             ("/1 1 move abs 50000", "@01 1 OK BUSY -- 0"),
-            ("/1 1", "@01 1 OK IDLE -- 0"),
+            ("/1 1 get pos", "@01 1 OK IDLE -- 0"),
             ("/1 1 get pos", "@01 1 OK IDLE -- 50000"),
         ]
     )
@@ -110,7 +117,11 @@ def test_same_side_approach_from_below() -> None:
 
 def test_stall_flag_and_rejection_are_errors() -> None:
     t = ScriptedTransport(
-        [("/1 1 home", "@01 1 OK IDLE FS 0"), ("/1 1 get foo", "@01 1 RJ IDLE -- BADCOMMAND")]
+        [
+            *LIMITS,
+            ("/1 1 home", "@01 1 OK IDLE FS 0"),
+            ("/1 1 get foo", "@01 1 RJ IDLE -- BADCOMMAND"),
+        ]
     )
     stage = ZaberStage(t, settings())
     with pytest.raises(StallError, match="stalled and stopped"):
@@ -127,7 +138,8 @@ def test_settings_validate() -> None:
 
 
 def test_alert_and_info_lines_are_skipped() -> None:
-    t = ScriptedTransport([("/1 1 get pos", "!01 1 IDLE --")], name="stage")
-    t._pending.append("@01 1 OK IDLE -- 1234")  # the reply following the alert
+    t = ScriptedTransport([*LIMITS, ("/1 1 get pos", "!01 1 IDLE --")], name="stage")
     stage = ZaberStage(t, settings())
+    stage.connect()
+    t._pending.append("@01 1 OK IDLE -- 1234")  # the reply following the alert
     assert stage.position() == pytest.approx(1234 * STEP)

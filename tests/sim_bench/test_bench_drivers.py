@@ -84,11 +84,13 @@ def test_cylinder_31_through_the_drivers_equals_the_dem(rig: SimRig) -> None:
     delay = rig.vibrometer.signal_delay_s()
     measured = acq.velocity_V * sens
     chain = dem.build_chain(dem.default_chain_spec())
+    shape = Burst(F_IN["ltr"], cycles=5)
+    samples = burst_samples(shape, 1e6)
     drive = dem.Drive(
         direction="ltr",
         kind="displacement",
         amplitude=rig.world.config.actuator.drive_amplitude(vpp / 2),
-        waveform=(burst_samples(Burst(F_IN["ltr"], cycles=5), 1e6), 1e6),
+        waveform=(samples, (samples.size - 1) / shape.duration_s),  # the burst's own carrier
     )
     res = dem.simulate(chain, [drive], duration_s=0.03, sample_rate_Hz=RATE)
     expected = np.interp(acq.time_s - delay, res.time_s, res.velocity[0, 30], left=0, right=0)

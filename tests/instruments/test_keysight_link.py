@@ -1,0 +1,126 @@
+"""The generator driver on the strict emulator and on a dying VISA link: late replies after a
+timeout, a stale error queue at connect, dead links, and the carrier as the instrument plays it."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pytest
+from scipy.interpolate import CubicSpline
+
+from instruments.burst import Burst
+from instruments.errors import InstrumentError, InstrumentTimeout
+from instruments.interfaces import BurstConfig
+from instruments.keysight import GeneratorLimits, KeysightGenerator
+from instruments.transport.visa import VisaTransport
+from sim_backend.emulators import KeysightEmulator, SimClock, SimTransport
+
+LIMITS = GeneratorLimits(max_piezo_V=150.0, amplifier_gain=20.0, max_amplitude_Vpp=10.0)
+
+
+def on_emulator() -> tuple[KeysightGenerator, KeysightEmulator]:
+    emu = KeysightEmulator()
+    return KeysightGenerator(SimTransport(emu, "generator", 2.0, SimClock()), LIMITS), emu
+
+
+def test_late_reply_after_a_timeout_is_never_read_as_the_next_answer() -> None:
+    gen, emu = on_emulator()
+    idn = gen.identify()
+    emu.late_replies = 1  # the "1" of *OPC? arrives after its timeout
+    with pytest.raises(InstrumentTimeout):
+        gen.wait_complete()
+    assert gen.identify() == idn  # the identity, not a stale "1"
+    assert gen.errors() == []
+
+
+def test_connect_clears_a_stale_error_queue() -> None:
+    gen, emu = on_emulator()
+    emu.push_error(-350, "Queue overflow")  # left over from the last session
+    gen.connect()
+    gen.configure_burst(1, BurstConfig(Burst(8920.0, cycles=5.0), amplitude_Vpp=1.0))
+    assert emu.channels[1].function == "ARB"
+
+
+@pytest.mark.parametrize("f_Hz", [8920.0, 6630.0, 12345.6])
+@pytest.mark.parametrize("rate", [1.0e6, 250e3])
+def test_carrier_as_played_is_the_protocols(f_Hz: float, rate: float) -> None:
+    gen, emu = on_emulator()
+    gen.configure_burst(
+        2, BurstConfig(Burst(f_Hz, cycles=5.0), amplitude_Vpp=1.0, sample_rate_Hz=rate)
+    )
+    ch = emu.channels[2]
+    x = np.asarray(ch.waveform)
+    t = np.arange(x.size) / ch.sample_rate_Hz  # the instrument plays point k at k / SRAT
+    # zero crossings of the carrier (the envelope is positive inside the window), from a
+    # cubic spline through the points as played
+    tc = CubicSpline(t, x).roots(extrapolate=False)
+    T = t[-1]
+    inner = np.unique(np.round(tc[(tc > 0.2 * T) & (tc < 0.8 * T)], 12))  # away from the tails
+    played = (inner.size - 1) / (2.0 * (inner[-1] - inner[0]))
+    assert abs(played / f_Hz - 1.0) < 2e-4, played
+
+
+class DyingResource:
+    """A pyvisa resource whose TCP link is gone (instrument off or unplugged)."""
+
+    def __init__(self, exc: BaseException) -> None:
+        self.exc = exc
+        self.timeout = 0
+        self.read_termination = self.write_termination = "\n"
+        self.baud_rate = 9600
+
+    def write(self, command: str) -> None:
+        raise self.exc
+
+    def query(self, command: str) -> str:
+        raise self.exc
+
+    def clear(self) -> None:
+        raise self.exc
+
+
+class Manager:
+    def __init__(self, resource: Any) -> None:
+        self.resource = resource
+
+    def open_resource(self, name: str) -> Any:
+        if isinstance(self.resource, BaseException):
+            raise self.resource
+        return self.resource
+
+
+@pytest.mark.parametrize(
+    "exc", [ConnectionRefusedError(111, "refused"), BrokenPipeError(32, "pipe")]
+)
+def test_dead_link_is_an_instrument_error_naming_instrument_resource_and_what_to_check(
+    exc: BaseException,
+) -> None:
+    t = VisaTransport(
+        "TCPIP0::10.0.0.5::INSTR", name="generator", resource_manager=Manager(DyingResource(exc))
+    )
+    gen = KeysightGenerator(t, LIMITS)
+    with pytest.raises(InstrumentError) as info:
+        gen.identify()
+    msg = str(info.value)
+    assert "generator (TCPIP0::10.0.0.5::INSTR)" in msg
+    assert "check that the instrument is on" in msg and type(exc).__name__ in msg
+    gen.safe_state()  # never raises
+
+
+def test_visa_open_failure_and_asrl_baud_rate() -> None:
+    with pytest.raises(InstrumentError, match=r"generator \(ASRL3::INSTR\): cannot open.*check"):
+        VisaTransport("ASRL3::INSTR", name="generator", resource_manager=Manager(OSError("gone")))
+    res = DyingResource(OSError())
+    VisaTransport(
+        "ASRL3::INSTR", name="vibrometer", baud_rate=115200, resource_manager=Manager(res)
+    )
+    assert res.baud_rate == 115200  # VISA's own default is 9600
+
+
+def test_identity_reports_the_output_load() -> None:
+    gen, _ = on_emulator()
+    gen.connect()
+    assert gen.identity()["load_ohm"] == {"1": 50.0, "2": 50.0}  # the instrument's default
+    gen.configure_burst(1, BurstConfig(Burst(8920.0, cycles=5.0), amplitude_Vpp=1.0))
+    assert gen.identity()["load_ohm"]["1"] == float("inf")
