@@ -211,3 +211,41 @@ def test_an_unsafe_end_is_shown_in_red_naming_the_output(qtbot: Any, tmp_path: P
     assert "b00000" in win.run_panel.where_label.styleSheet()
     assert "SWITCH OFF BY HAND" in win.statusBar().currentMessage()
     assert read_run(tmp_path / "u.h5").status == "unsafe"
+
+
+def test_a_resume_of_a_file_another_process_writes_is_refused(
+    qtbot: Any, window: MainWindow, tmp_path: Path
+) -> None:
+    """Issue 15: the window refuses (nothing moves, the file is untouched) and names the other
+    writer, as run_protocol does with exit status 2; once that process is gone it resumes."""
+    import json
+    import socket
+    import subprocess
+    import sys
+
+    from daq.engine import RunEngine
+    from daq.store.lock import lock_path
+    from protocols.bench import load_bench
+    from protocols.schema import load_protocol
+
+    part = tmp_path / "part.h5"
+    bf = load_bench()
+    inst = assemble(bf, faults={"stage_stall": True, "after_acquisitions": 4})
+    assert RunEngine(load_protocol(SMOKE), bf, inst, part).run().status == "failed"
+    before = part.read_bytes()
+    other = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        lock_path(part).write_text(json.dumps({"host": socket.gethostname(), "pid": other.pid}))
+        connect(qtbot, window)
+        with qtbot.waitSignal(window.run_finished, timeout=60_000) as blocker:
+            assert window.start_run(part)
+        assert blocker.args == ["refused"]
+        text = window.run_panel.where_label.text()
+        assert text.startswith("run refused") and f"process {other.pid}" in text
+        assert part.read_bytes() == before
+    finally:
+        other.kill()
+        other.wait()
+    with qtbot.waitSignal(window.run_finished, timeout=60_000) as blocker:
+        assert window.start_run(part)  # the lock of a dead process is stale: taken over
+    assert blocker.args == ["complete"]
