@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from sim_backend.dem.beam import beam_modes
+from sim_backend.dem.beam import cylinder_modes
 from sim_backend.dem.contact import hertz_beta, linear_stiffness, static_overlap
 from sim_backend.dem.material import Material
 from sim_backend.dem.spec import ChainSpec
@@ -103,12 +103,19 @@ def build_chain(spec: ChainSpec) -> Chain:
     mres = np.empty((n, J))
     omega = np.empty((n, J))
     factors = spec.density_factors or {}
-    for i, L in enumerate(lengths):
-        mat = material
+    materials = []
+    for i in range(n):
         f = factors.get(i + 1, 1.0)
-        if f != 1.0:  # a denser (heavier) cylinder of the same stiffness
-            mat = dataclasses.replace(material, density_kg_per_m3=material.density_kg_per_m3 * f)
-        modes = beam_modes(float(L), spec.diameter, mat, J, spec.beam_theory)
+        # a denser (heavier) cylinder of the same stiffness
+        materials.append(
+            material
+            if f == 1.0
+            else dataclasses.replace(material, density_kg_per_m3=material.density_kg_per_m3 * f)
+        )
+    all_modes = cylinder_modes(
+        [float(L) for L in lengths], spec.diameter, materials, J, spec.beam_theory
+    )
+    for i, modes in enumerate(all_modes):
         mass[i] = modes.mass_kg
         m0[i] = modes.residual_mass_kg
         mres[i] = modes.modal_mass_kg

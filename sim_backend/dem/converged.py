@@ -22,6 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sim_backend.dem.accuracy_scenes import AccuracyScene
+from sim_backend.dem.beam import MODES_VERSION
 from sim_backend.dem.errors import rel_l2
 from sim_backend.dem.kernel import NUMERICS_VERSION
 
@@ -90,7 +91,7 @@ def converged_reference(
     """
     method = (
         f"{integrator}|dt0={dt0_s!r}|tol={tolerance_rel!r}|min={min_dt_s!r}"
-        f"|kernel={NUMERICS_VERSION}"
+        f"|kernel={NUMERICS_VERSION}|modes={MODES_VERSION}"
     )
     folder = cache_dir() / "dem-reference"
     path = folder / f"{scene.digest(method)}.npz"

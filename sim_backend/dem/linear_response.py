@@ -28,6 +28,7 @@ from scipy.signal import lfilter
 from sim_backend.dem.chain import Chain
 from sim_backend.dem.drive import Drive
 from sim_backend.dem.reference import linear_matrices
+from sim_backend.dem.threads import one_blas_thread
 
 __all__ = ["FINE_STEP_S", "LinearResponse", "drive_end_s", "linear_response"]
 
@@ -109,10 +110,11 @@ def _modes(chain: Chain, direction: str, kind: str) -> _Modes:
     A[:D, D:] = np.eye(D)
     A[D:, :D] = -minv[:, None] * K
     A[D:, D:] = -minv[:, None] * C
-    lam, V = eig(A)
     B = np.concatenate([np.zeros(D), minv * b])
     Bc = np.concatenate([np.zeros(D), minv * bc])
-    g, gc = solve(V, np.stack([B, Bc], axis=1)).T
+    with one_blas_thread():
+        lam, V = eig(A)
+        g, gc = solve(V, np.stack([B, Bc], axis=1)).T
     scale = np.maximum(np.abs(lam), 1.0)
     keep = lam.imag >= -1e-9 * scale
     pair = lam.imag > 1e-9 * scale

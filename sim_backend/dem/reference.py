@@ -18,6 +18,7 @@ from scipy.linalg import eigh
 
 from sim_backend.dem.chain import Chain
 from sim_backend.dem.drive import Drive
+from sim_backend.dem.threads import one_blas_thread
 
 __all__ = ["linear_matrices", "make_rhs"]
 
@@ -86,7 +87,8 @@ def linear_matrices(
             Kb[0, 1:] = -kr[i]
             Kb[1:, 0] = -kr[i]
             Kb[1:, 1:] = np.diag(kr[i])
-            lam, phi = eigh(Kb, Mb)
+            with one_blas_thread():
+                lam, phi = eigh(Kb, Mb)
             lam[0] = 0.0
             w = np.sqrt(np.maximum(lam, 0.0))
             C[np.ix_(idx, idx)] += Mb @ phi @ np.diag(2.0 * zeta * w) @ phi.T @ Mb

@@ -18,6 +18,7 @@ from sim_backend.dem.drive import Drive
 from sim_backend.dem.errors import step_doubling_error
 from sim_backend.dem.kernel import drift_coefficients, run_batch
 from sim_backend.dem.step_limit import StepTooLargeError, check_step
+from sim_backend.dem.threads import one_blas_thread
 
 __all__ = [
     "DEFAULT_DT_S",
@@ -122,7 +123,12 @@ class BlockModes:
 
 
 def block_modes(chain: Chain) -> BlockModes:
-    """Eigen-decompose each cylinder's (J+1)-DOF block (no contacts)."""
+    """Eigen-decompose each cylinder's (J+1)-DOF block (no contacts); one BLAS thread."""
+    with one_blas_thread():
+        return _block_modes(chain)
+
+
+def _block_modes(chain: Chain) -> BlockModes:
     N, J = chain.n, chain.n_modes
     phi0 = np.empty((N, J + 1))
     omega = np.empty((N, J + 1))

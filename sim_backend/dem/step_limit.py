@@ -27,9 +27,13 @@ mode and the lightest primary mass.
 
 from __future__ import annotations
 
+import hashlib
+import json
 import math
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
@@ -37,6 +41,7 @@ from numpy.typing import NDArray
 from sim_backend.dem.chain import Chain
 from sim_backend.dem.drive import Drive
 from sim_backend.dem.kernel import drift_coefficients
+from sim_backend.dem.threads import one_blas_thread
 
 __all__ = [
     "DEFAULT_OVERLAP_MARGIN",
@@ -48,6 +53,7 @@ __all__ = [
     "largest_stable_step",
     "reference_overlap_m",
     "spectral_radius",
+    "stable_up_to",
 ]
 
 #: contacts are linearised at least at this multiple of the static overlap delta0
@@ -197,10 +203,11 @@ def spectral_radius(chain: Chain, integrator: str, h: float, overlap_m: float) -
     """Largest ``|eigenvalue|`` of the linearised one-step map at step ``h`` (s), contacts
     linearised at ``overlap_m`` (m); the maximum over the checked windows of a long chain."""
     k = contact_stiffness_N_per_m(chain, overlap_m)
-    return max(
-        float(np.abs(np.linalg.eigvals(_step_matrix(w, integrator, h, k))).max())
-        for w in _windows(chain)
-    )
+    with one_blas_thread():
+        return max(
+            float(np.abs(np.linalg.eigvals(_step_matrix(w, integrator, h, k))).max())
+            for w in _windows(chain)
+        )
 
 
 def _overlaps(chain: Chain, overlap_m: float | None) -> tuple[float, ...]:
@@ -286,11 +293,123 @@ def largest_stable_step(
     return lim
 
 
+#: overlaps of the stability range scan: ``delta0 * RANGE_RATIO^n`` (stiffness ratio 1.118)
+RANGE_RATIO = 1.25
+
+
+@dataclass
+class _RangeVerdict:
+    """What is known of one (chain, integrator, step): stable at every scanned overlap up to
+    ``stable_to_m`` (m), and unstable at ``unstable_at_m`` (m; inf: none found yet)."""
+
+    start_m: float
+    stable_to_m: float = 0.0
+    unstable_at_m: float = math.inf
+    evaluations: int = 0
+
+
+_RANGE_CACHE: dict[str, _RangeVerdict] = {}
+
+
+def _range_key(chain: Chain, integrator: str, h: float) -> str:
+    from sim_backend.dem.beam import MODES_VERSION
+
+    text = f"{chain.spec.model_dump_json()}|{integrator}|{h!r}|modes={MODES_VERSION}"
+    return hashlib.sha1(text.encode()).hexdigest()
+
+
+def _disk_path() -> Path:
+    from sim_backend.dem.converged import cache_dir
+
+    return cache_dir() / "step-stability.json"
+
+
+def _disk_load(key: str) -> _RangeVerdict | None:
+    try:
+        entry = json.loads(_disk_path().read_text()).get(key)
+        if entry is None:
+            return None
+        return _RangeVerdict(float(entry[0]), float(entry[1]), float(entry[2]), 0)
+    except (OSError, ValueError, TypeError, IndexError, AttributeError):
+        return None
+
+
+def _disk_store(key: str, v: _RangeVerdict) -> None:
+    """Merge one verdict into the cache file (best effort: a read-only cache is no error)."""
+    path = _disk_path()
+    try:
+        try:
+            data = json.loads(path.read_text())
+            if not isinstance(data, dict) or len(data) > 4096:
+                data = {}
+        except (OSError, ValueError):
+            data = {}
+        data[key] = [v.start_m, v.stable_to_m, v.unstable_at_m if math.isfinite(v.unstable_at_m)
+                     else "inf"]  # fmt: skip
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(f".{os.getpid()}.tmp")
+        tmp.write_text(json.dumps(data))
+        os.replace(tmp, path)
+    except OSError:
+        pass
+
+
+def stable_up_to(chain: Chain, integrator: str, h: float, overlap_m: float) -> bool:
+    """Whether step ``h`` (s) is linearly stable for every contact overlap from ``delta0`` up to
+    ``overlap_m`` (m), checked on the grid ``delta0 RANGE_RATIO^n`` and at the grid point at or
+    above ``overlap_m`` (a run's contacts pass through every overlap up to their peak).
+
+    Computed once per (chain, integrator, step): the verdict grows lazily with the largest
+    overlap asked for and is kept in memory and in the user's cache folder
+    (``step-stability.json``), so the checks of a protocol's many drives, and of later runs,
+    cost one scan. A grid point above ``overlap_m`` that is unstable falls back to the exact
+    two-point check of :func:`is_stable` at ``overlap_m``.
+    """
+    key = _range_key(chain, integrator, h)
+    v = _RANGE_CACHE.get(key)
+    if v is None:
+        v = _disk_load(key)
+        if v is None:
+            start = chain.delta0_m if chain.delta0_m > 0 else overlap_m / RANGE_RATIO**8
+            v = _RangeVerdict(start)
+        if len(_RANGE_CACHE) > 256:
+            _RANGE_CACHE.clear()
+        _RANGE_CACHE[key] = v
+    if overlap_m <= v.stable_to_m:
+        return True
+    if overlap_m >= v.unstable_at_m:
+        return False
+    d = v.start_m if v.stable_to_m <= 0.0 else v.stable_to_m * RANGE_RATIO
+    changed = False
+    while True:
+        if d >= v.unstable_at_m:
+            break
+        v.evaluations += 1
+        changed = True
+        if spectral_radius(chain, integrator, h, d) > 1.0 + STABILITY_TOL:
+            v.unstable_at_m = d
+            break
+        v.stable_to_m = d
+        if d >= overlap_m:
+            break
+        d *= RANGE_RATIO
+    if changed:
+        _disk_store(key, v)
+    if overlap_m <= v.stable_to_m:
+        return True
+    if v.unstable_at_m <= overlap_m:
+        return False
+    # unstable only at the grid point above: decide at the overlap itself (two-point check)
+    return is_stable(chain, integrator, h, overlap_m)
+
+
 def check_step(chain: Chain, integrator: str, h: float, drives: Sequence[Drive] = ()) -> None:
     """Raise :class:`StepTooLargeError` when step ``h`` (s) of ``integrator`` is linearly unstable
-    on ``chain`` for contacts pressed by ``drives`` (see :func:`reference_overlap_m`)."""
+    on ``chain`` for contacts pressed by ``drives`` (see :func:`reference_overlap_m`): stable at
+    every overlap from ``delta0`` to the reference overlap (:func:`stable_up_to`, once per chain
+    and step)."""
     overlap = reference_overlap_m(chain, drives)
-    if is_stable(chain, integrator, h, overlap):
+    if stable_up_to(chain, integrator, h, overlap):
         return
     lim = largest_stable_step(chain, integrator, overlap)
     raise StepTooLargeError(

@@ -1,0 +1,174 @@
+"""No hidden seconds in setting up a chain (issue 18): the modes in closed form without BLAS,
+one BLAS thread in the small linear algebra, the step-stability check once per chain and step."""
+
+from __future__ import annotations
+
+import math
+import types
+
+import numpy as np
+import pytest
+import scipy.linalg
+from threadpoolctl import threadpool_limits
+
+from instruments.burst import Burst
+from sim_backend import dem
+from sim_backend.dem import beam, simulation, step_limit
+from sim_backend.dem.material import FUSED_QUARTZ
+from sim_backend.dem.threads import blas_threads
+
+D = 0.0136
+
+
+def _expm_det_and_numer(lam: float, s: float, r: float) -> tuple[float, float]:
+    """The previous path: scipy's expm of the 4x4 transfer matrix."""
+    a = np.array([[0, 1, 0, s], [0, 0, 1, 0], [0, -lam * r, 0, -1], [-lam, 0, 0, 0]], float)
+    t = scipy.linalg.expm(a)
+    return t[2, 2] * t[3, 3] - t[2, 3] * t[3, 2], -(t[2, 2] * t[3, 0] - t[3, 2] * t[2, 0])
+
+
+@pytest.mark.parametrize("theory", ["timoshenko", "euler-bernoulli"])
+def test_closed_form_transfer_matrix_is_expm(theory: str) -> None:
+    _, s, r, _ = beam.section_parameters(0.09, D, FUSED_QUARTZ, theory)
+    # up to beta = 12, and past the second spectrum of a stubby beam (lambda r s > 1)
+    for lam in (1e-3, 0.3, 12.0, 500.0, 2.0e4, 4.0 / max(r * s, 1e-30) if s else 3e4):
+        with threadpool_limits(1, user_api="blas"):
+            ref = scipy.linalg.expm(
+                np.array([[0, 1, 0, s], [0, 0, 1, 0], [0, -lam * r, 0, -1], [-lam, 0, 0, 0]])
+            )
+        got = beam._transfer(np.array(lam), np.array(s), np.array(r))
+        assert np.abs(got - ref).max() <= 1e-12 * np.abs(ref).max()
+
+
+def test_modes_agree_with_the_expm_path_and_masses_with_a_40_digit_reference() -> None:
+    mpmath = pytest.importorskip("mpmath")
+    mpmath.mp.dps = 40
+    lengths = (0.09, 0.1, 0.11)
+    new = beam.cylinder_modes(list(lengths), D, [FUSED_QUARTZ] * 3, 3)
+    for L, modes in zip(lengths, new, strict=True):
+        m_half, s, r, lam_w2 = beam.section_parameters(L, D, FUSED_QUARTZ, "timoshenko")
+        for w, m_j in zip(modes.omega_rad_s, modes.modal_mass_kg, strict=True):
+            lam0 = lam_w2 * w**2
+            # frequencies: the root of the previous (expm) determinant to 1e-12
+            d_lo = _expm_det_and_numer(lam0 * (1 - 1e-12), s, r)[0]
+            d_hi = _expm_det_and_numer(lam0 * (1 + 1e-12), s, r)[0]
+            assert (d_lo < 0) != (d_hi < 0)
+
+            def det(x: object, s: float = s, r: float = r) -> object:
+                a = mpmath.matrix([[0, 1, 0, s], [0, 0, 1, 0], [0, -x * r, 0, -1], [-x, 0, 0, 0]])
+                t = mpmath.expm(a)
+                return t[2, 2] * t[3, 3] - t[2, 3] * t[3, 2], -(
+                    t[2, 2] * t[3, 0] - t[3, 2] * t[2, 0]
+                )
+
+            lam = mpmath.findroot(lambda x: det(x)[0], mpmath.mpf(lam0))
+            ddet = mpmath.diff(lambda x: det(x)[0], lam)
+            m_exact = float(-det(lam)[1] / (ddet * lam**2) * 2 * m_half)
+            assert math.sqrt(float(lam) / lam_w2) == pytest.approx(w, rel=1e-13)
+            # the effective masses to 1e-11 (the expm path's difference quotient: 1e-9 to 4e-9)
+            assert m_j == pytest.approx(m_exact, rel=1e-11)
+
+
+def test_euler_bernoulli_six_modes_match_the_cantilever_formulas() -> None:
+    """Roots of 1 + cos b cosh b = 0 and effective-mass fractions 4 sigma^2 / b^2 (the expm path
+    was 2e-4 off at the sixth mode)."""
+    from scipy.optimize import brentq
+
+    modes = beam.beam_modes(0.1, D, FUSED_QUARTZ, 6, "euler-bernoulli")
+    _, _, _, lam_w2 = beam.section_parameters(0.1, D, FUSED_QUARTZ, "euler-bernoulli")
+    beta = (lam_w2 * modes.omega_rad_s**2) ** 0.25
+    for j, b in enumerate(beta):
+        guess = (j + 0.5) * math.pi
+        exact = brentq(lambda x: np.cos(x) + 1.0 / np.cosh(x), guess - 0.5, guess + 0.5, xtol=1e-15)
+        assert b == pytest.approx(exact, rel=1e-9)
+        sigma = (math.sinh(exact) - math.sin(exact)) / (math.cosh(exact) + math.cos(exact))
+        frac = modes.modal_mass_kg[j] / modes.mass_kg
+        assert frac == pytest.approx(4 * sigma**2 / exact**2, rel=1e-8)
+
+
+def test_build_chain_calls_no_dense_linear_algebra(monkeypatch: pytest.MonkeyPatch) -> None:
+    """build_chain reaches no BLAS/LAPACK routine (numpy.linalg, scipy.linalg), so no BLAS
+    thread pool wakes up: the cost that took a minute on a loaded two-core host."""
+
+    def refuse(*args: object, **kwargs: object) -> None:
+        raise AssertionError("build_chain called a dense linear-algebra routine")
+
+    import sim_backend.dem as dem_pkg
+
+    for mod in (np.linalg, scipy.linalg):
+        for name in dir(mod):
+            if not name.startswith("_") and callable(getattr(mod, name)):
+                monkeypatch.setattr(mod, name, refuse, raising=False)
+    for name in dir(dem_pkg):  # names imported into the model's modules
+        module = getattr(dem_pkg, name)
+        if isinstance(module, types.ModuleType):
+            for attr, value in vars(module).items():
+                owner = getattr(value, "__module__", "") or ""
+                if callable(value) and owner.startswith(("scipy.linalg", "numpy.linalg")):
+                    monkeypatch.setattr(module, attr, refuse)
+    spec = dem.default_chain_spec().model_copy(update={"n_modes": 4})  # not built elsewhere
+    beam._modes_cached.cache_clear()
+    chain = dem.build_chain(spec)
+    assert chain.omega_res_rad_s.shape == (31, 4)
+
+
+def test_small_linear_algebra_runs_on_one_blas_thread(
+    chain: dem.Chain, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    seen: list[list[int]] = []
+    eigh, eigvals = simulation.eigh, np.linalg.eigvals
+
+    def eigh_spy(*args: object, **kwargs: object) -> object:
+        seen.append(blas_threads())
+        return eigh(*args, **kwargs)
+
+    def eigvals_spy(*args: object, **kwargs: object) -> object:
+        seen.append(blas_threads())
+        return eigvals(*args, **kwargs)
+
+    monkeypatch.setattr(simulation, "eigh", eigh_spy)
+    monkeypatch.setattr(np.linalg, "eigvals", eigvals_spy)
+    with threadpool_limits(2, user_api="blas"):  # the user's (or the default) setting
+        simulation.block_modes(chain)
+        step_limit.spectral_radius(chain, "strang", 1e-6, chain.delta0_m)
+        after = blas_threads()
+    assert seen and all(n == [1] * len(n) for n in seen if n)
+    assert all(n == 2 for n in after)  # restored
+
+
+def test_stability_check_runs_once_per_chain_and_step(
+    undamped: dem.Chain, monkeypatch: pytest.MonkeyPatch, tmp_path: object
+) -> None:
+    monkeypatch.setenv("BIAFC_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(step_limit, "_RANGE_CACHE", {}, raising=False)
+    monkeypatch.setattr(step_limit, "_STABLE_CACHE", {})
+    calls = []
+    radius = step_limit.spectral_radius
+
+    def counting(*args: object, **kwargs: object) -> float:
+        calls.append(args)
+        return radius(*args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(step_limit, "spectral_radius", counting)
+    amplitudes = undamped.delta0_m * np.geomspace(0.05, 3.0, 24)
+    drives = [dem.Drive("ltr", "displacement", float(a), burst=Burst(8.92e3)) for a in amplitudes]
+    for d in drives:  # one key each, as the simulated bench's DEM runs are
+        step_limit.check_step(undamped, "blanes-moan4", 4e-6, [d])
+    first = len(calls)
+    assert 0 < first <= 14  # one scan up to the largest overlap, not two eigenproblems per key
+    for d in drives:
+        step_limit.check_step(undamped, "blanes-moan4", 4e-6, [d])
+    assert len(calls) == first
+    # a new process (empty memory) reads the verdict from the user's cache folder
+    monkeypatch.setattr(step_limit, "_RANGE_CACHE", {}, raising=False)
+    step_limit.check_step(undamped, "blanes-moan4", 4e-6, drives[-1:])
+    assert len(calls) == first
+
+
+def test_range_check_refuses_what_the_two_point_check_refuses(undamped: dem.Chain) -> None:
+    lim = step_limit.largest_stable_step(undamped, "strang")
+    for h in (0.98 * lim.h_max_s, 1.05 * lim.h_max_s):
+        for ov in (undamped.delta0_m, 4 * undamped.delta0_m):
+            if not step_limit.is_stable(undamped, "strang", h, ov):
+                assert not step_limit.stable_up_to(undamped, "strang", h, ov)
+    assert step_limit.stable_up_to(undamped, "strang", 0.98 * lim.h_max_s, 4 * undamped.delta0_m)
