@@ -47,7 +47,14 @@ from scipy.ndimage import gaussian_filter1d
 from scipy.optimize import least_squares
 
 from analysis.compare import point_states
-from analysis.model_run import RunSetup, _on_time_axis, chain_spec_of_run, run_setup
+from analysis.model_run import (
+    RunSetup,
+    _on_time_axis,
+    chain_spec_of_run,
+    resonator_damping,
+    run_setup,
+    with_resonator_damping,
+)
 from analysis.spectra import PAD_FACTOR, amplitude_spectrum
 from protocols.runfile import RunData
 from sim_backend.dem import ChainSpec, Drive, build_chain
@@ -119,7 +126,7 @@ def _with(spec: ChainSpec, values: dict[str, float]) -> ChainSpec:
     if "diameter" in values:
         upd["diameter"] = values["diameter"]
     if "damping" in values:
-        upd["damping"] = spec.damping.model_copy(update={"resonator_ratio": values["damping"]})
+        spec = with_resonator_damping(spec, values["damping"])
     if "E" in values:
         upd["material"] = spec.material.model_copy(update={"youngs_modulus": values["E"]})
     return spec.model_copy(update=upd)
@@ -129,7 +136,7 @@ def _start_values(spec: ChainSpec, setup: RunSetup) -> dict[str, float]:
     return {
         "F0": float(spec.preload),
         "diameter": float(spec.diameter),
-        "damping": float(spec.damping.resonator_ratio),
+        "damping": resonator_damping(spec),
         "stroke": float(setup.stroke_m_per_V) if setup.stroke_m_per_V is not None else 1.0,
         "E": float(spec.material.youngs_modulus),
     }

@@ -47,7 +47,9 @@ __all__ = [
     "chain_spec_of_run",
     "predict",
     "predicted_run",
+    "resonator_damping",
     "run_setup",
+    "with_resonator_damping",
 ]
 
 #: decoder analog full scale (V) when the file does not say (OFV-5000: +/-10 V)
@@ -184,6 +186,18 @@ def run_setup(run: RunData, piezo_stroke_m_per_V: float | None = None) -> RunSet
             fs = min(fs, float(bench.daq.velocity_range))
         clip = sens * fs
     return RunSetup(dirs, clip, gain, stroke, used)
+
+
+def resonator_damping(spec: ChainSpec) -> float:
+    """The resonators' modal damping ratio of ``spec`` (the one place that names the field)."""
+    return float(spec.damping.resonator_ratio)
+
+
+def with_resonator_damping(spec: ChainSpec, ratio: float) -> ChainSpec:
+    """``spec`` with the resonators' modal damping ratio ``ratio``."""
+    return spec.model_copy(
+        update={"damping": spec.damping.model_copy(update={"resonator_ratio": float(ratio)})}
+    )
 
 
 def chain_spec_of_run(run: RunData) -> ChainSpec:

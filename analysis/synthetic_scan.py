@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis.model_run import _on_time_axis
+from analysis.model_run import _on_time_axis, with_resonator_damping
 from instruments.burst import Burst
 from protocols.bench import default_bench_path, parse_bench
 from protocols.runfile import ChainInfo, RunFileWriter, ScanSpec
@@ -140,12 +140,8 @@ def withheld_chain() -> tuple[ChainSpec, float]:
     diameter 13.9 mm (13.6 mm), resonator damping ratio 0.005 (Q = 100; default 0.002), the
     piezo's stroke x0.8 (what the bench file says is 0.05 um/V, the truth 0.04 um/V)."""
     base = default_chain_spec()
-    spec = base.model_copy(
-        update={
-            "preload": 4.3,
-            "diameter": 13.9e-3,
-            "damping": base.damping.model_copy(update={"resonator_ratio": 0.005}),
-        }
+    spec = with_resonator_damping(
+        base.model_copy(update={"preload": 4.3, "diameter": 13.9e-3}), 0.005
     )
     return spec, 0.8
 

@@ -21,6 +21,7 @@ from typing import Any
 
 from analysis.calibrate import calibrate
 from analysis.compare_report import compare_run
+from analysis.model_run import resonator_damping
 from analysis.synthetic_scan import PROOF_SCAN, withheld_chain, write_synthetic_scan
 from protocols.runfile import read_run
 
@@ -33,7 +34,7 @@ def run() -> dict[str, Any]:
     truth = {
         "F0": true_spec.preload,
         "diameter": true_spec.diameter,
-        "damping": true_spec.damping.resonator_ratio,
+        "damping": resonator_damping(true_spec),
         "stroke": factor * 5e-8,  # the shipped simulated bench says 0.05 um/V
     }
     with tempfile.TemporaryDirectory() as tmp:

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from analysis.calibrate import CalibrationError, calibrate, parse_fit
+from analysis.model_run import with_resonator_damping
 from analysis.synthetic_scan import write_synthetic_scan
 from daq.cli.biafc import main as biafc
 from daq.cli.run_protocol import main as run_protocol
@@ -18,13 +19,7 @@ from sim_backend.dem import build_chain, default_chain_spec, load_chain_spec
 
 BASE = default_chain_spec()
 #: the truth the fit is not told: F0 4.3 N, d 13.9 mm, resonators' Q 100 (default 250), stroke x0.8
-TRUE = BASE.model_copy(
-    update={
-        "preload": 4.3,
-        "diameter": 13.9e-3,
-        "damping": BASE.damping.model_copy(update={"resonator_ratio": 0.005}),
-    }
-)
+TRUE = with_resonator_damping(BASE.model_copy(update={"preload": 4.3, "diameter": 13.9e-3}), 0.005)
 TRUE_VALUES = {"F0": 4.3, "diameter": 13.9e-3, "damping": 0.005, "stroke": 0.8 * 5e-8}
 TOLERANCE = {"F0": 0.02, "diameter": 0.02, "damping": 0.15, "stroke": 0.03}
 
