@@ -182,7 +182,11 @@ def assemble(
 
         world = SimWorld(sim_world_config(bf, seed=seed, faults=faults))
         try:
-            transports = {n: world.transport(n) for n in ("generator", "vibrometer", "stage")}
+            transports = {
+                "generator": world.transport("generator"),
+                "vibrometer": world.transport("vibrometer", b.vibrometer.baud_rate),
+                "stage": world.transport("stage", b.stage.baud_rate),
+            }
             generator, vibrometer, stage = build_drivers(b, transports, world.clock)
         except (ImportError, AttributeError, NotImplementedError) as exc:
             raise AssemblyError(

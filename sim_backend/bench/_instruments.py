@@ -104,7 +104,7 @@ class Instruments:
         self.position_m: float | None = None
 
     # --- transports -----------------------------------------------------------------------
-    def transport(self, instrument: str) -> WorldTransport:
+    def transport(self, instrument: str, baud_rate: int | None = None) -> WorldTransport:
         if instrument not in self._emulators:
             raise ValueError(
                 f"unknown simulated instrument {instrument!r}; choose from {', '.join(INSTRUMENTS)}"
@@ -114,6 +114,7 @@ class Instruments:
             name=f"{instrument} (simulated)",
             timeout_s=TIMEOUT_S[instrument],
             clock=self.clock,
+            baud_rate=baud_rate,
         )
         return WorldTransport(inner, self, instrument)
 

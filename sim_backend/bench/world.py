@@ -154,9 +154,10 @@ class SimWorld:
         #: the simulated clock shared by the emulators, the drivers' polling and the digitiser
         self.clock: SimClock = self._inst.clock
 
-    def transport(self, instrument: str) -> WorldTransport:
-        """A Transport to the emulated ``"generator"``, ``"vibrometer"`` or ``"stage"``."""
-        return self._inst.transport(instrument)
+    def transport(self, instrument: str, baud_rate: int | None = None) -> WorldTransport:
+        """A Transport to the emulated ``"generator"``, ``"vibrometer"`` or ``"stage"``
+        (``baud_rate``: the line speed of a serial one, as the bench file sets it)."""
+        return self._inst.transport(instrument, baud_rate)
 
     def digitiser(self, device: str = "Dev1") -> SimDigitiser:
         """The simulated digitiser (same interface as the NI-DAQmx one)."""

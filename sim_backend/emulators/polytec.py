@@ -55,6 +55,8 @@ class PolytecEmulator:
         self.range_value = value.replace(" ", "")
         self.decoder_index = decoder_index
         self.echo = echo
+        #: line speed (baud) the device listens at; 115200 as shipped
+        self.baud_rate = BAUD_RATE
         self.signal_level = 0.8
         #: the decoder's signal delay (s), settable
         self.decoder_delay_s = VD09_DELAY_S
@@ -88,7 +90,7 @@ class PolytecEmulator:
             return {"Name": self.head, "Version": "1.1", "AutoFocusResult": "Found"}.get(item)
         if device == "Interface" and index == "0":
             return {"Name": "RS-232", "Echo": "On" if self.echo else "Off"}.get(
-                item, str(BAUD_RATE) if item == "BaudRate" else None
+                item, str(self.baud_rate) if item == "BaudRate" else None
             )
         if device == "VeloDec" and index == str(self.decoder_index):
             if item == "Name":

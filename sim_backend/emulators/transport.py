@@ -28,6 +28,8 @@ class SimTransport:
     A reply of several lines (late replies arriving before the current one) is read line by
     line: the query returns the first, :meth:`read` the next. :meth:`clear` is a device clear
     (pending lines dropped, the emulator's ``clear()`` called when it has one).
+    ``baud_rate``: the line speed this end talks at (``None``: not a serial line); an emulator
+    with a ``baud_rate`` of its own hears only garbage at another speed and never answers.
     """
 
     def __init__(
@@ -36,8 +38,10 @@ class SimTransport:
         name: str = "sim",
         timeout_s: float = 1.0,
         clock: Clock | None = None,
+        baud_rate: int | None = None,
     ) -> None:
         self.emulator = emulator
+        self.baud_rate = baud_rate
         self.name = name
         self.timeout_s = float(timeout_s)
         self.clock = clock
@@ -51,6 +55,9 @@ class SimTransport:
         self.log.append(what)
         if not self.emulator.responsive:
             return None
+        theirs = getattr(self.emulator, "baud_rate", None)
+        if self.baud_rate is not None and theirs is not None and theirs != self.baud_rate:
+            return None  # framing errors: the instrument sees no command
         return self.emulator.handle(message)
 
     def _timeout(self, what: str) -> InstrumentTimeout:

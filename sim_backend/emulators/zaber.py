@@ -51,6 +51,8 @@ class ZaberEmulator:
         microstep_m = full_step_m / self.resolution
         self.microstep_m = microstep_m
         self.late_replies = 0
+        #: line speed (baud) the device listens at; 115200 as shipped
+        self.baud_rate = BAUD_RATE
         self._held: list[str] = []
         self.limit_min = round(float(travel_m[0]) / microstep_m)
         self.limit_max = round(float(travel_m[1]) / microstep_m)

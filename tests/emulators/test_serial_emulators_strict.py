@@ -1,4 +1,5 @@
-"""The vibrometer driver on the strict OFV-5000 emulator: echo on at power-up, the command set
+"""The serial emulators are strict: the OFV-5000 echoes at power-up and both it and the Zaber
+stage answer only at 115200 baud. The vibrometer driver on the OFV-5000 emulator: the command set
 of the manual (VeloDec, Interface echo, MaxFreq, SignalDelay, AutoFocus Search/Found)."""
 
 from __future__ import annotations
@@ -39,3 +40,35 @@ def test_decoder_number_from_the_bench_file() -> None:
     vib.set_velocity_range("VD-09 5mm/s/V")
     assert emu.range_name == "VD-09 5mm/s/V"
     assert vib.bandwidth_Hz() == pytest.approx(500e3)
+
+
+def test_serial_emulators_answer_only_at_their_baud_rate() -> None:
+    from instruments.errors import InstrumentTimeout
+    from instruments.zaber import ZaberSettings, ZaberStage
+    from sim_backend.emulators import ZaberEmulator
+
+    clock = SimClock()
+    for_rate = {
+        rate: ZaberStage(
+            SimTransport(ZaberEmulator(clock), "stage", 1.0, clock, baud_rate=rate),
+            ZaberSettings(model="X-LSM500A", clock=clock),
+        )
+        for rate in (9600, 115200)
+    }
+    with pytest.raises(InstrumentTimeout):
+        for_rate[9600].connect()  # VISA's ASRL default: the stage hears garbage
+    assert for_rate[115200].connect()["resolution"] == 64
+    vib = PolytecVibrometer(SimTransport(PolytecEmulator(), "vib", 1.0, clock, baud_rate=9600))
+    with pytest.raises(InstrumentTimeout):
+        vib.connect()
+
+
+def test_a_wrong_baud_rate_in_the_bench_file_fails_on_the_simulated_bench() -> None:
+    from daq.bench_assembly import assemble
+    from instruments.errors import InstrumentTimeout
+    from protocols.bench import default_bench_path, parse_bench
+
+    text = default_bench_path().read_text()
+    text = text.replace("baud_rate: 115200              # Zaber", "baud_rate: 9600  # Zaber")
+    with pytest.raises(InstrumentTimeout, match="stage"):
+        assemble(parse_bench(text))
