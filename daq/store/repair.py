@@ -66,6 +66,23 @@ def _leftovers(path: Path) -> list[Path]:
     return out
 
 
+def _rebuild(path: Path) -> None:
+    """Copy every attribute and object of ``path`` into a new file, then put it in its place
+    (the copy is complete before the original is replaced)."""
+    import os
+
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.repair")
+    try:
+        with h5py.File(path, "r") as src, h5py.File(tmp, "w", libver="latest") as dst:
+            for key, value in src.attrs.items():
+                dst.attrs[key] = value
+            for name in src:
+                src.copy(src[name], dst, name=name)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
 def repair_run(path: str | Path) -> RepairReport:
     """Repair ``path`` in place (see the module); raises :class:`StoreError` (one line) when
     it is not a run file or another process writes it."""
@@ -91,7 +108,14 @@ def repair_run(path: str | Path) -> RepairReport:
                 actions.append("cleared the open-for-write flags of a killed writer")
         status_after = status_before
         if status_before == "running":
-            writer = RunFileWriter.open_existing(path, swmr=False)
+            try:
+                writer = RunFileWriter.open_existing(path, swmr=False)
+            except (OSError, RuntimeError) as exc:
+                # killed while writing metadata outside SWMR (closing): the data reads, but
+                # the file takes no more writes; copy every object into a fresh file
+                _rebuild(path)
+                actions.append(f"rebuilt the file (it took no writes: {str(exc)[:60]})")
+                writer = RunFileWriter.open_existing(path, swmr=False)
             n_done, n_failed, n_pending = before_counts
             writer.log(
                 "error",

@@ -177,3 +177,31 @@ def test_a_kill_while_creating_leaves_nothing_under_the_run_name(tmp_path) -> No
     assert _plain_h5py_opens(path)
     assert biafc(["repair", str(path)]) == 0
     assert not list(tmp_path.glob(".new.h5.*.part"))  # the dead creator's leftover is gone
+
+
+def test_repair_rebuilds_a_file_that_takes_no_more_writes(
+    proto_file, tmp_path, monkeypatch
+) -> None:
+    """Found by the fault campaign: a writer killed while closing (metadata half written
+    outside SWMR) leaves a file that reads but refuses writes ("bad heap index"); repair then
+    copies every object into a fresh file, losing no point."""
+    from protocols.runfile import RunFileWriter
+
+    killed = tmp_path / "heap.h5"
+    _killed_run(proto_file, killed)
+    done = _done(killed)
+    real = RunFileWriter.open_existing.__func__  # type: ignore[attr-defined]
+    calls: list[int] = []
+
+    def refuses_once(cls, path, **kw):  # type: ignore[no-untyped-def]
+        calls.append(1)
+        if len(calls) == 1:
+            raise OSError("Can't synchronously write data (bad heap index)")
+        return real(cls, path, **kw)
+
+    monkeypatch.setattr(RunFileWriter, "open_existing", classmethod(refuses_once))
+    assert biafc(["repair", str(killed)]) == 0
+    assert _plain_h5py_opens(killed) and read_run(killed).status == "aborted"
+    for d, mask in _done(killed).items():
+        np.testing.assert_array_equal(mask, done[d])
+    assert not list(tmp_path.glob(".heap.h5.*.repair"))
