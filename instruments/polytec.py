@@ -176,8 +176,10 @@ class PolytecVibrometer:
 
     # --- identity -----------------------------------------------------------------------
     def connect(self) -> str:
-        """Echo off (read back), then :meth:`identify`."""
-        self._set("echo_set", "Off", "echo_get")
+        """Echo off (read back; skipped when the table has no ``echo_set``), then
+        :meth:`identify`."""
+        if self.commands["echo_set"] is not None:
+            self._set("echo_set", "Off", "echo_get")
         return self.identify()
 
     def identify(self) -> str:

@@ -106,3 +106,16 @@ def test_errors_and_timeouts() -> None:
     with pytest.raises(ReplyError):
         v.set_velocity_range("nonsense")  # refused before sending
     assert t.done
+
+
+def test_controller_without_an_echo_setting_connects() -> None:
+    t = ScriptedTransport(
+        [
+            ("Get,Controller,0,Name", "OFV-5000"),
+            ("Get,SensorHead,0,Name", "OFV-534"),
+            ("Get,Controller,0,Version", "Not Available"),
+        ]
+    )
+    v = PolytecVibrometer(t, PolytecSettings(commands={"echo_set": None}))
+    assert v.connect() == "OFV-5000 / OFV-534"  # no Set,Interface,... sent; no firmware
+    assert t.done and v._firmware is None
