@@ -189,14 +189,15 @@ def run_setup(run: RunData, piezo_stroke_m_per_V: float | None = None) -> RunSet
 
 
 def resonator_damping(spec: ChainSpec) -> float:
-    """The resonators' modal damping ratio of ``spec`` (the one place that names the field)."""
-    return float(spec.damping.resonator_ratio)
+    """The modal damping ratio of ``spec``'s free-free bending modes (the chain file's
+    ``damping.bending_mode_ratio``; the one place that names the field)."""
+    return float(spec.damping.bending_mode_ratio)
 
 
 def with_resonator_damping(spec: ChainSpec, ratio: float) -> ChainSpec:
-    """``spec`` with the resonators' modal damping ratio ``ratio``."""
+    """``spec`` with the bending modes' damping ratio ``ratio`` (``bending_mode_ratio``)."""
     return spec.model_copy(
-        update={"damping": spec.damping.model_copy(update={"resonator_ratio": float(ratio)})}
+        update={"damping": spec.damping.model_copy(update={"bending_mode_ratio": float(ratio)})}
     )
 
 

@@ -19,6 +19,7 @@ import numpy as np
 
 from instruments.burst import Burst
 from sim_backend import dem
+from sim_backend.dem.spec import benchmark_chain_spec
 
 F_IN_HZ = {"ltr": 8.92e3, "rtl": 6.63e3}
 N_AMPLITUDES = 64
@@ -46,7 +47,7 @@ def rel_l2(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def run() -> dict[str, Any]:
-    chain = dem.build_chain(dem.default_chain_spec())
+    chain = dem.build_chain(benchmark_chain_spec())
     amplitudes = chain.delta0_m * np.geomspace(0.01, 4.0, N_AMPLITUDES)
     drives = _drives(chain, amplitudes)
     # warm-up (loads the compiled kernel from numba's cache, or compiles it once)

@@ -39,6 +39,7 @@ from sim_backend.dem.accuracy_scenes import AccuracyScene
 from sim_backend.dem.converged import converged_reference
 from sim_backend.dem.errors import rel_l2
 from sim_backend.dem.simulation import DEFAULT_INTEGRATOR, INTEGRATORS
+from sim_backend.dem.spec import benchmark_chain_spec
 
 #: turns of (peak, sweep) measured; the best of each is reported
 SWEEP_REPEATS = 5
@@ -145,7 +146,7 @@ def _rtol_for(scene: AccuracyScene, ref: Any, target: float) -> tuple[Any, list[
 
 
 def run() -> dict[str, Any]:
-    spec = dem.default_chain_spec()
+    spec = benchmark_chain_spec()
     chain = dem.build_chain(spec)
     amplitudes = chain.delta0_m * np.geomspace(0.01, 4.0, N_AMPLITUDES)
     drives = _drives(chain, amplitudes)

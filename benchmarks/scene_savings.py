@@ -30,6 +30,7 @@ from sim_backend.dem.scene import (
     plan_scene,
     run_scene,
 )
+from sim_backend.dem.spec import benchmark_chain_spec
 
 F_IN_HZ = {"ltr": 8.92e3, "rtl": 6.63e3}
 RATE_HZ = 250e3
@@ -96,8 +97,8 @@ def _row(
 
 
 def run() -> dict[str, Any]:
-    chain = dem.build_chain(dem.default_chain_spec())
-    chain6 = dem.build_chain(dem.default_chain_spec().model_copy(update={"n_modes": 6}))
+    chain = dem.build_chain(benchmark_chain_spec())
+    chain6 = dem.build_chain(benchmark_chain_spec().model_copy(update={"n_modes": 6}))
     small = np.geomspace(0.001, 0.02, 8)  # x delta0: the linear regime
     # warm-up: compile / load the kernel
     dem.simulate(chain, [_drives(chain, small)[0]], duration_s=1e-4, sample_rate_Hz=RATE_HZ)

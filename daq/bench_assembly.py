@@ -25,6 +25,7 @@ from protocols.yamlfile import ConfigError
 __all__ = [
     "AssemblyError",
     "assemble",
+    "bench_chain_spec",
     "chain_info",
     "model_chain_info",
     "sim_world_config",
@@ -40,12 +41,17 @@ def _chain_spec(bf: BenchFile) -> Any:
     from sim_backend import dem
 
     path = bf.chain_path()
-    if path is None:
-        return dem.default_chain_spec()
     try:
-        return dem.load_chain_spec(path)
+        return dem.load_chain_with_settings(path, bf.bench.chain_set)
     except (dem.ChainFileError, OSError) as exc:
-        raise bf.doc.error(("chain",), str(exc)) from None
+        field = "chain_set" if bf.bench.chain_set else "chain"
+        raise bf.doc.error((field,), str(exc)) from None
+
+
+def bench_chain_spec(bf: BenchFile) -> Any:
+    """The bench's chain spec (its chain file with its ``chain_set``), validated; a bad one
+    raises a one-line :class:`ConfigError` naming the bench file's field."""
+    return _chain_spec(bf)
 
 
 def chain_info(bf: BenchFile, n_bands: int = 3) -> ChainInfo:

@@ -11,9 +11,17 @@ Shape, for ``0 <= t <= T`` with ``T = duration_s`` and ``t0 = T/2``::
 
 so the envelope is exactly zero at both ends (first and last samples are 0) and peaks at 1.
 With ``cycles = n`` the burst spans ``T = n / f_c`` and ``sigma = T / 6`` (the window holds
-+/-3 sigma). With ``width_s = sigma`` given instead, ``T = 6 sigma``. The normalised waveform
-peaks at exactly 1 at ``t0`` (cosine carrier), so an amplitude is the burst's peak value;
-amplitudes are applied by whoever plays it.
++/-3 sigma). With ``width_s = sigma`` given instead, ``T = 6 sigma``. A Gaussian sigma in
+frequency ``sigma_f`` is the same burst with ``width_s = 1 / (2 pi sigma_f)``
+(:func:`width_from_sigma_f`).
+
+The default burst is :data:`NARROWBAND_CYCLES` = 21 cycles (sigma = 3.5 carrier periods, a
+spectral sigma of ``f_c / 22``: +-0.41 kHz at 8.92 kHz, +-0.30 kHz at 6.63 kHz). A 5-cycle burst
+(:data:`NAMED_BURSTS` ``"five_cycle"``) spreads over about +-1.5 kHz, and its tail near 8.0 kHz,
+where the bands of the chain's end cylinders nearly meet, passes through the chain linearly.
+
+The normalised waveform peaks at exactly 1 at ``t0`` (cosine carrier), so an amplitude is the
+burst's peak value; amplitudes are applied by whoever plays it.
 """
 
 from __future__ import annotations
@@ -24,10 +32,33 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["SIGMAS_PER_HALF_WINDOW", "Burst", "burst_samples", "burst_waveform"]
+__all__ = [
+    "NAMED_BURSTS",
+    "NARROWBAND_CYCLES",
+    "SIGMAS_PER_HALF_WINDOW",
+    "Burst",
+    "burst_samples",
+    "burst_waveform",
+    "width_from_sigma_f",
+]
 
 #: the window spans +/- this many Gaussian sigmas around its centre
 SIGMAS_PER_HALF_WINDOW = 3.0
+
+#: the default burst length in carrier cycles: sigma = 3.5 carrier periods, narrow enough in
+#: frequency (sigma_f = f_c / 22) that the paper's linear regime shows on the default chain
+NARROWBAND_CYCLES = 21.0
+
+#: bursts by name, as cycles in the window: ``narrowband`` (the default) and ``five_cycle``
+#: (broadband, +-1.5 kHz; kept for labs that use it)
+NAMED_BURSTS: dict[str, float] = {"narrowband": NARROWBAND_CYCLES, "five_cycle": 5.0}
+
+
+def width_from_sigma_f(sigma_f_Hz: float) -> float:
+    """Gaussian sigma in time (s) of a burst whose spectral Gaussian sigma is ``sigma_f_Hz``."""
+    if not (math.isfinite(sigma_f_Hz) and sigma_f_Hz > 0):
+        raise ValueError(f"burst spectral sigma must be > 0 Hz, got {sigma_f_Hz!r}")
+    return 1.0 / (2.0 * math.pi * sigma_f_Hz)
 
 
 @dataclass(frozen=True)
@@ -45,7 +76,7 @@ class Burst:
     """
 
     f_center_Hz: float
-    cycles: float | None = 5.0
+    cycles: float | None = NARROWBAND_CYCLES
     width_s: float | None = None
 
     def __post_init__(self) -> None:
@@ -65,6 +96,11 @@ class Burst:
             return self.cycles / self.f_center_Hz
         assert self.width_s is not None
         return 2.0 * SIGMAS_PER_HALF_WINDOW * self.width_s
+
+    @property
+    def sigma_f_Hz(self) -> float:
+        """Gaussian standard deviation of the spectrum in Hz, ``1 / (2 pi sigma_s)``."""
+        return 1.0 / (2.0 * math.pi * self.sigma_s)
 
     @property
     def sigma_s(self) -> float:

@@ -144,6 +144,8 @@ class BenchSpec(_Model):
     name: str
     simulated: bool = False
     chain: str | None = None  # chain file (sim_backend.dem) relative to the bench file
+    # KEY=VALUE settings applied to that chain (``diameter=12mm``), validated like the chain file
+    chain_set: list[str] = Field(default_factory=list)
     generator: GeneratorSpec
     direction_channel: dict[Literal["ltr", "rtl"], Literal[1, 2]]
     amplifier: AmplifierSpec
@@ -235,11 +237,39 @@ def default_bench_path() -> Path:
     return Path(__file__).resolve().parent / "benches" / "sim_bench.yaml"
 
 
-def load_bench(path: str | Path | None = None) -> BenchFile:
-    """Load and validate a bench file (default: the shipped simulated bench)."""
+def load_bench(
+    path: str | Path | None = None, chain_set: list[str] | tuple[str, ...] = ()
+) -> BenchFile:
+    """Load and validate a bench file (default: the shipped simulated bench).
+
+    ``chain_set`` (``run_protocol --set KEY=VALUE``) adds chain settings to the file's
+    ``chain_set``; they become part of the bench text, so the run file records them."""
     p = Path(path) if path is not None else default_bench_path()
     doc = load_yaml(p)
+    if chain_set:
+        import yaml
+
+        items = [*list(validate(doc, BenchSpec).chain_set), *chain_set]
+        text = _without_key(doc.text, "chain_set")
+        text = text.rstrip("\n") + "\n# run_protocol --set\n"
+        text += yaml.safe_dump({"chain_set": items}, default_flow_style=None, width=1000)
+        doc = parse_yaml(text, str(p))
     return BenchFile(validate(doc, BenchSpec), doc, p)
+
+
+def _without_key(text: str, key: str) -> str:
+    """``text`` without a top-level ``key:`` line (and its indented continuation lines)."""
+    out: list[str] = []
+    skipping = False
+    for line in text.splitlines():
+        if line.startswith(f"{key}:"):
+            skipping = True
+            continue
+        if skipping and (line.startswith((" ", "\t", "-")) or not line.strip()):
+            continue
+        skipping = False
+        out.append(line)
+    return "\n".join(out) + "\n"
 
 
 def parse_bench(text: str, source: str = "<bench>") -> BenchFile:

@@ -5,8 +5,8 @@ A protocol file (YAML) looks like::
     name: ltr_highamp
     directions: [ltr]                 # ltr, rtl or both
     burst:
-      ltr: {f_center: 8.92 kHz, cycles: 5}
-      rtl: {f_center: 6.63 kHz, width: 0.75 ms}
+      ltr: {f_center: 8.92 kHz, shape: narrowband}   # or cycles: 21, width: 0.39 ms (sigma
+      rtl: {f_center: 6.63 kHz, sigma_f: 0.3 kHz}     # in time), sigma_f (sigma in frequency)
     amplitudes: [2 Vpp, 5 Vpp]        # generator Vpp, or actuator displacement (um, m); or
                                       # {start: 0.1 Vpp, stop: 10 Vpp, count: 6, spacing: log}
     cylinders: all                    # or [1, 5, 16, 31]
@@ -78,30 +78,46 @@ def parse_amplitude(value: Any) -> tuple[AmplitudeKind, float]:
 
 
 class BurstSpec(_Model):
-    """One direction's burst: centre frequency (Hz) and cycles or width (s)."""
+    """One direction's burst: centre frequency (Hz) and exactly one width: ``cycles`` in the
+    window, ``width`` (Gaussian sigma in time, s), ``sigma_f`` (Gaussian sigma in frequency,
+    Hz) or ``shape`` (a name of :data:`instruments.burst.NAMED_BURSTS`: ``narrowband``, the
+    default of the shipped protocols, or ``five_cycle``)."""
 
     f_center: Frequency
     cycles: float | None = None
     width: Duration | None = None
+    sigma_f: Frequency | None = None
+    shape: str | None = None
 
     @model_validator(mode="after")
     def _one_of(self) -> BurstSpec:
-        if (self.cycles is None) == (self.width is None):
-            raise ValueError("give exactly one of 'cycles' or 'width'")
+        from instruments.burst import NAMED_BURSTS
+
+        given = [self.cycles, self.width, self.sigma_f, self.shape]
+        if sum(x is not None for x in given) != 1:
+            raise ValueError("give exactly one of 'cycles', 'width', 'sigma_f' or 'shape'")
         if self.f_center <= 0:
             raise ValueError("f_center must be > 0")
         if self.cycles is not None and not self.cycles > 0:
             raise ValueError("cycles must be > 0")
         if self.width is not None and not self.width > 0:
             raise ValueError("width must be > 0")
+        if self.sigma_f is not None and not self.sigma_f > 0:
+            raise ValueError("sigma_f must be > 0")
+        if self.shape is not None and self.shape not in NAMED_BURSTS:
+            raise ValueError(f"shape: one of {', '.join(NAMED_BURSTS)}, got {self.shape!r}")
         return self
 
     def burst(self) -> Any:
         """The :class:`instruments.burst.Burst` of this spec."""
-        from instruments.burst import Burst
+        from instruments.burst import NAMED_BURSTS, Burst, width_from_sigma_f
 
         if self.width is not None:
             return Burst(self.f_center, cycles=None, width_s=self.width)
+        if self.sigma_f is not None:
+            return Burst(self.f_center, cycles=None, width_s=width_from_sigma_f(self.sigma_f))
+        if self.shape is not None:
+            return Burst(self.f_center, cycles=NAMED_BURSTS[self.shape])
         return Burst(self.f_center, cycles=self.cycles)
 
 

@@ -1,4 +1,6 @@
-"""``biafc bands [--chain CHAIN.yaml] [--csv FILE] [--bands B] [--check]``: quasi-band edges.
+"""``biafc bands [--chain CHAIN.yaml] [--set KEY=VALUE] [--csv FILE] [--bands B] [--check]``.
+
+Quasi-band edges.
 
 Prints, for every cylinder, the onset (q = 0) and cutoff (q = pi) edges of the first B bands in
 kHz (band 0 is the acoustic band [0, c1]; band 1 the first local-resonance band). ``--check``
@@ -19,6 +21,14 @@ from daq.cli.biafc import CliError
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--chain", type=Path, help="chain file (YAML); default: the paper's chain")
+    parser.add_argument(
+        "--set",
+        dest="settings",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="change a chain setting (diameter=12mm, preload=4N, n_modes=5; repeatable)",
+    )
     parser.add_argument("--csv", type=Path, help="also write the table to this CSV file")
     parser.add_argument("--bands", type=int, default=3, help="number of bands B (default 3)")
     parser.add_argument(
@@ -30,7 +40,7 @@ def run(args: argparse.Namespace) -> int:
     from sim_backend import dem
 
     try:
-        spec = dem.load_chain_spec(args.chain) if args.chain else dem.default_chain_spec()
+        spec = dem.load_chain_with_settings(args.chain, args.settings)
     except dem.ChainFileError as exc:
         raise CliError(str(exc)) from None
     chain = dem.build_chain(spec)

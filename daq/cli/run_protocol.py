@@ -65,6 +65,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "(the differences and the new bench are recorded in the file)",
     )
     parser.add_argument("--seed", type=int, default=None, help="seed of the simulated bench")
+    parser.add_argument(
+        "--set",
+        dest="settings",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="change a setting of the simulated bench's chain (diameter=12mm, preload=4N; "
+        "repeatable); recorded in the run file's bench text",
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress output")
 
 
@@ -155,13 +164,20 @@ def _load(args: argparse.Namespace) -> tuple[Any, Any, Any]:
         except StoreError as exc:
             raise CliError(str(exc)) from None
     try:
+        settings = tuple(getattr(args, "settings", ()) or ())
+        if settings and args.resume is not None:
+            raise CliError("--set: not with --resume (the run continues on the file's bench)")
         pf = load_protocol(args.protocol) if args.protocol is not None else None
-        bf = load_bench(args.bench) if args.bench is not None else None
+        bf = load_bench(args.bench, chain_set=settings) if args.bench is not None else None
         if stored is not None:
             pf, bf = pf or stored[0], bf or stored[1]
         elif bf is None:
-            bf = load_bench(None)
+            bf = load_bench(None, chain_set=settings)
         assert pf is not None and bf is not None
+        if bf.bench.chain_set:
+            from daq.bench_assembly import bench_chain_spec
+
+            bench_chain_spec(bf)  # a bad chain setting is refused before anything runs
         plan = make_plan(pf, bf)
     except ConfigError as exc:
         raise CliError(str(exc)) from None

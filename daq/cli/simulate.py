@@ -23,6 +23,7 @@ from typing import Any, Literal
 import numpy as np
 
 from daq.cli.biafc import CliError
+from instruments.burst import NAMED_BURSTS
 from instruments.units import UnitError, parse_quantity
 from sim_backend.dem.step_limit import StepTooLargeError
 
@@ -39,8 +40,27 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--out", type=Path, help="run file to create (.h5); required unless --explain"
     )
     parser.add_argument("--chain", type=Path, help="chain file (YAML); default: the paper's")
+    parser.add_argument(
+        "--set",
+        dest="settings",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="change a chain setting (diameter=12mm, preload=4N, n_modes=5; repeatable), "
+        "validated like the chain file and recorded in the run file",
+    )
     parser.add_argument("--frequency", help="burst centre frequency (default 8.92 kHz / 6.63 kHz)")
-    parser.add_argument("--cycles", type=float, default=5.0, help="burst cycles (default 5)")
+    width = parser.add_mutually_exclusive_group()
+    width.add_argument(
+        "--burst",
+        choices=tuple(NAMED_BURSTS),
+        help="a named burst: narrowband (the default, 21 cycles) or five_cycle (broadband)",
+    )
+    width.add_argument("--cycles", type=float, help="burst length in carrier cycles (default 21)")
+    width.add_argument("--width", help="burst Gaussian sigma in time with unit, e.g. '0.4 ms'")
+    width.add_argument(
+        "--sigma-f", help="burst Gaussian sigma in frequency with unit, e.g. '0.4 kHz'"
+    )
     parser.add_argument("--duration", default="30 ms", help="recorded window (default 30 ms)")
     parser.add_argument("--rate", default="500 kS/s", help="record rate (default 500 kS/s)")
     parser.add_argument("--integrator", default="default", help="integrator name")
@@ -88,9 +108,37 @@ def parse_amplitude(text: str) -> tuple[Literal["displacement", "force"], float]
     raise CliError(f"--amplitude: {text!r} needs a length (e.g. '2 um') or a force (e.g. '12 N')")
 
 
+def _burst(args: argparse.Namespace, f_c: float) -> Any:
+    """The burst of the command line: ``--burst``, ``--cycles``, ``--width`` or ``--sigma-f``;
+    default the narrowband burst (:data:`instruments.burst.NARROWBAND_CYCLES` cycles)."""
+    from instruments.burst import NARROWBAND_CYCLES, Burst, width_from_sigma_f
+
+    if args.width is not None:
+        width = _quantity(args.width, "time", "--width")
+        if not width > 0:
+            raise CliError("--width: must be > 0")
+        return Burst(f_c, cycles=None, width_s=width)
+    if args.sigma_f is not None:
+        sigma_f = _quantity(args.sigma_f, "frequency", "--sigma-f")
+        if not sigma_f > 0:
+            raise CliError("--sigma-f: must be > 0")
+        return Burst(f_c, cycles=None, width_s=width_from_sigma_f(sigma_f))
+    if args.burst is not None:
+        return Burst(f_c, cycles=NAMED_BURSTS[args.burst])
+    return Burst(f_c, cycles=args.cycles if args.cycles is not None else NARROWBAND_CYCLES)
+
+
+def _describe(burst: Any) -> str:
+    length = (
+        f"{burst.cycles:g} cycles"
+        if burst.cycles is not None
+        else f"{burst.duration_s * 1e3:.3g} ms"
+    )
+    return f"{length}, sigma {burst.sigma_s * 1e3:.3g} ms / {burst.sigma_f_Hz / 1e3:.3g} kHz"
+
+
 def run(args: argparse.Namespace) -> int:
     from daq.bench_assembly import model_chain_info
-    from instruments.burst import Burst
     from protocols.runfile import RunFileWriter, ScanSpec
     from sim_backend import dem
 
@@ -101,14 +149,14 @@ def run(args: argparse.Namespace) -> int:
     dt = _quantity(args.dt, "time", "--dt") if args.dt else None
     if not (duration > 0 and rate > 0 and (dt is None or dt > 0)):
         raise CliError("--duration, --rate and --dt must be > 0")
-    if not (math.isfinite(args.cycles) and args.cycles > 0):
+    if args.cycles is not None and not (math.isfinite(args.cycles) and args.cycles > 0):
         raise CliError("--cycles: must be > 0")
     if args.out is None and not args.explain:
         raise CliError("--out: required (or --explain to print the scene's plan only)")
     if args.out is not None and args.out.exists():
         raise CliError(f"--out: {args.out} exists already")
     try:
-        spec = dem.load_chain_spec(args.chain) if args.chain else dem.default_chain_spec()
+        spec = dem.load_chain_with_settings(args.chain, args.settings)
     except dem.ChainFileError as exc:
         raise CliError(str(exc)) from None
     if args.integrator != "default" and args.integrator not in dem.INTEGRATORS:
@@ -117,7 +165,7 @@ def run(args: argparse.Namespace) -> int:
     if not 1 <= args.bands <= chain.n_modes + 1:
         raise CliError(f"--bands: must be in 1..{chain.n_modes + 1}")
     bands = dem.quasi_bands(chain, args.bands)
-    burst = Burst(f_c if f_c is not None else DEFAULT_F_HZ[args.direction], cycles=args.cycles)
+    burst = _burst(args, f_c if f_c is not None else DEFAULT_F_HZ[args.direction])
     drive = dem.Drive(direction=args.direction, kind=kind, amplitude=amplitude, burst=burst)
     if args.explain:  # the plan only: sim_backend.dem.scene decides, nothing runs
         from sim_backend.dem.scene import Scene, plan_scene
@@ -131,7 +179,16 @@ def run(args: argparse.Namespace) -> int:
         res, simulation = _run_lean(chain, drive, duration, rate)
     else:
         res, simulation = _run_full(args, chain, drive, duration, rate, dt)
-    simulation.update(drive_kind=kind, far_end=chain.far_end, chain_yaml=spec.to_yaml())
+    simulation.update(
+        drive_kind=kind,
+        far_end=chain.far_end,
+        chain_yaml=spec.to_yaml(),
+        chain_settings=" ".join(args.settings),
+        bending_mode_damping_ratio=chain.bending_damping_ratio,
+        contact_dashpot_damping_ratio=chain.contact_damping_ratio,
+        burst_sigma_s=burst.sigma_s,
+        burst_sigma_f_Hz=burst.sigma_f_Hz,
+    )
     scan = ScanSpec(
         direction=args.direction,
         amplitudes=np.array([amplitude]),
@@ -140,6 +197,7 @@ def run(args: argparse.Namespace) -> int:
         time_s=res.time_s,
         f_center_Hz=burst.f_center_Hz,
         cycles=burst.cycles,
+        width_s=burst.width_s,
         drive_units=drive.units,
     )
     try:
@@ -168,7 +226,8 @@ def run(args: argparse.Namespace) -> int:
     lost = "dissipated by the damping" if chain.damped else "the integrator's energy error"
     print(
         f"{args.out}: {args.direction} {kind} {amplitude:g} {drive.units} at "
-        f"{burst.f_center_Hz / 1e3:g} kHz, {chain.n} cylinders, {res.time_s.size} samples, "
+        f"{burst.f_center_Hz / 1e3:g} kHz ({_describe(burst)}), {chain.n} cylinders, "
+        f"{res.time_s.size} samples, "
         f"{simulation['integrator']}{step}, {simulation['wall_s']:.2f} s"
     )
     print(
@@ -184,6 +243,10 @@ def run(args: argparse.Namespace) -> int:
         f"{output_peak_definition(sweep)}: {float(sweep.output_Hz[0]) / 1e3:.3f} kHz "
         f"(input {float(sweep.input_Hz[0]) / 1e3:.3f} kHz, detuning "
         f"{float(sweep.detuning_Hz[0]) / 1e3:+.3f} kHz)"
+    )
+    print(
+        f"far/near rms ratio (cylinder {sweep.far} / cylinder {sweep.entry}): "
+        f"{math.sqrt(float(sweep.transmission[0])):.4g}"
     )
     return 0
 

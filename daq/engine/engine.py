@@ -248,7 +248,7 @@ class RunEngine:
         proto = self.protocol_file.protocol
         specs = []
         for d in self.plan.directions:
-            b = proto.burst[d]  # type: ignore[index]
+            b = proto.burst[d].burst()  # type: ignore[index]
             specs.append(
                 ScanSpec(
                     direction=d,
@@ -256,9 +256,9 @@ class RunEngine:
                     amplitude_units=self.plan.amplitude_units,
                     cylinders=self.plan.cylinders,
                     time_s=time_s,
-                    f_center_Hz=b.f_center,
+                    f_center_Hz=b.f_center_Hz,
                     cycles=b.cycles,
-                    width_s=b.width,
+                    width_s=b.width_s,
                     averages=proto.averages,
                     drive_units="V",
                 )

@@ -732,9 +732,12 @@ def _protocol_fields(proto: Any, plan: Any) -> dict[str, str]:
     """The protocol's resolved fields, SI with units, for the protocol panel."""
     acq = proto.acquisition
     out: dict[str, str] = {"name": proto.name, "directions": ", ".join(proto.direction_list)}
-    for d, b in proto.burst.items():
-        shape = f"{b.cycles:g} cycles" if b.cycles is not None else f"width {b.width:g} s"
-        out[f"burst.{d}"] = f"f_center {b.f_center:g} Hz, {shape}"
+    for d, spec in proto.burst.items():
+        b = spec.burst()
+        shape = f"{b.cycles:g} cycles" if b.cycles is not None else f"width {b.width_s:g} s"
+        out[f"burst.{d}"] = (
+            f"f_center {b.f_center_Hz:g} Hz, {shape} (sigma_f {b.sigma_f_Hz:.4g} Hz)"
+        )
     if plan is not None:
         unit = plan.amplitude_units
         amps = ", ".join(f"{a:.4g}" for a in plan.amplitudes)

@@ -16,6 +16,7 @@ from sim_backend.dem.spec import (
     ChainSpec,
     default_chain_spec,
     load_chain_spec,
+    load_chain_with_settings,
 )
 
 __all__ = [
@@ -32,6 +33,7 @@ __all__ = [
     "continuum_bands",
     "default_chain_spec",
     "load_chain_spec",
+    "load_chain_with_settings",
     "quasi_bands",
     "simulate",
 ]

@@ -17,7 +17,7 @@ from instruments.burst import Burst
 from sim_backend.dem.chain import Chain, build_chain
 from sim_backend.dem.drive import Drive
 from sim_backend.dem.simulation import SimResult, simulate
-from sim_backend.dem.spec import ChainSpec, default_chain_spec
+from sim_backend.dem.spec import ChainSpec, benchmark_chain_spec
 
 __all__ = ["BUILTIN_SCENES", "DEFAULT_F_HZ", "AccuracyScene", "builtin_scene"]
 
@@ -126,10 +126,11 @@ def builtin_scene(
     duration_s: float = 10e-3,
     sample_rate_Hz: float = 250e3,
 ) -> AccuracyScene:
-    """A scene of :data:`BUILTIN_SCENES` on ``chain_spec`` (default: the paper's chain)."""
+    """A scene of :data:`BUILTIN_SCENES` on ``chain_spec`` (default: the paper's chain with the
+    contact dashpot of the recorded measurements, :func:`benchmark_chain_spec`)."""
     if name not in BUILTIN_SCENES:
         raise ValueError(f"unknown scene {name!r}; choose from {', '.join(BUILTIN_SCENES)}")
-    spec = chain_spec if chain_spec is not None else default_chain_spec()
+    spec = chain_spec if chain_spec is not None else benchmark_chain_spec()
     if name == "linear":
         amplitude = 0.01 * build_chain(spec).delta0_m
     else:

@@ -36,7 +36,8 @@ class Chain:
     m_res_kg: [N, J] resonator masses (kg).
     k_res_N_per_m: [N, J] resonator stiffnesses (N/m).
     omega_res_rad_s: [N, J] centre-clamped angular frequencies (rad/s).
-    resonator_damping_ratio: modal damping ratio of every resonator mode.
+    bending_damping_ratio: modal damping ratio of every cylinder's free-free bending modes (the
+        flexible modes of the contact-free block, primary mass + resonators).
     contact_damping_ratio: contact dashpot ratio, c = 2 zeta sqrt(K m0) per contact.
     far_end: "wall" or "free".
     material: the material.
@@ -58,7 +59,7 @@ class Chain:
     m_res_kg: NDArray[np.float64]
     k_res_N_per_m: NDArray[np.float64]
     omega_res_rad_s: NDArray[np.float64]
-    resonator_damping_ratio: float
+    bending_damping_ratio: float
     contact_damping_ratio: float
     far_end: str
     material: Material
@@ -67,7 +68,7 @@ class Chain:
     def hunt_crossley_chi_s_per_m(self) -> NDArray[np.float64]:
         """[N+1] Hunt-Crossley factor chi = c / F0 (s/m) of each contact, so that the contact
         force is ``beta d^1.5 (1 + chi d')``; 0 where there is no dashpot (also at F0 = 0, where
-        the spec requires ``contact_ratio = 0``)."""
+        the spec requires ``contact_dashpot_ratio = 0``)."""
         dash = self.contact_dashpot_Ns_per_m()
         if self.f0_N > 0:
             return dash / self.f0_N
@@ -75,8 +76,8 @@ class Chain:
 
     @property
     def damped(self) -> bool:
-        """True when any damping ratio (resonators or contacts) is above 0."""
-        return self.resonator_damping_ratio > 0.0 or self.contact_damping_ratio > 0.0
+        """True when any damping ratio (bending modes or contacts) is above 0."""
+        return self.bending_damping_ratio > 0.0 or self.contact_damping_ratio > 0.0
 
     def contact_dashpot_Ns_per_m(self) -> NDArray[np.float64]:
         """[N+1] dashpot coefficient (N s/m) of each contact: wall-#1, #1-#2, ..., #N-wall."""
@@ -142,8 +143,8 @@ def build_chain(spec: ChainSpec) -> Chain:
         m_res_kg=mres,
         k_res_N_per_m=mres * omega**2,
         omega_res_rad_s=omega,
-        resonator_damping_ratio=spec.damping.resonator_ratio,
-        contact_damping_ratio=spec.damping.contact_ratio,
+        bending_damping_ratio=spec.damping.bending_mode_ratio,
+        contact_damping_ratio=spec.damping.contact_dashpot_ratio,
         far_end=spec.far_end,
         material=material,
         rest_overlap_m=rest,

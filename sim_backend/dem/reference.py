@@ -77,7 +77,7 @@ def linear_matrices(
                 mat[left, right] -= val
                 mat[right, left] -= val
     # block-modal damping of the resonators (the kernel's: ratio zeta on every flexible mode)
-    zeta = chain.resonator_damping_ratio
+    zeta = chain.bending_damping_ratio
     if zeta > 0:
         for i in range(N):
             idx = [i] + [res(i, j) for j in range(J)]

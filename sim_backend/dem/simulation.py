@@ -270,7 +270,7 @@ def simulate(
     n_samples = math.floor(duration_s * sample_rate_Hz + 1e-9) + 1
 
     N, K = modes.phi0.shape
-    zeta = np.full((N, K), chain.resonator_damping_ratio)
+    zeta = np.full((N, K), chain.bending_damping_ratio)
     zeta[:, 0] = 0.0
     sizes, seq, merge = _scheme(a_w)
     drift = np.stack([drift_coefficients(modes.omega, zeta, s * h) for s in sizes])

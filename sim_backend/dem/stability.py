@@ -35,7 +35,7 @@ from sim_backend.dem.step_limit import largest_stable_step, reference_overlap_m
 
 __all__ = ["CASES", "CaseResult", "adaptive_reference", "choose_step", "run_case"]
 
-UNDAMPED = {"resonator_ratio": 0.0, "contact_ratio": 0.0}
+UNDAMPED = {"bending_mode_ratio": 0.0, "contact_dashpot_ratio": 0.0}
 RATE_HZ = 250.0e3
 
 

@@ -18,6 +18,14 @@ def chain() -> dem.Chain:
 def undamped() -> dem.Chain:
     """The default chain with every damping ratio 0 (energy balances exactly)."""
     spec = dem.default_chain_spec().model_copy(
-        update={"damping": DampingSpec(resonator_ratio=0.0, contact_ratio=0.0)}
+        update={"damping": DampingSpec(bending_mode_ratio=0.0, contact_dashpot_ratio=0.0)}
     )
     return dem.build_chain(spec)
+
+
+@pytest.fixture(scope="session")
+def dashpot_chain() -> dem.Chain:
+    """The default chain with the contact dashpot on (0.005): the benchmarks' scene."""
+    from sim_backend.dem.spec import benchmark_chain_spec
+
+    return dem.build_chain(benchmark_chain_spec())

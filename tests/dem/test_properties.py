@@ -29,8 +29,8 @@ def chains(draw: st.DrawFn, far_end: str | None = None, damped: bool | None = No
             "far_end": far_end or draw(st.sampled_from(["wall", "free"])),
             "preload": f"{draw(st.sampled_from([1.0, 5.0, 20.0])):g} N",
             "damping": {
-                "resonator_ratio": 0.01 if damp else 0.0,
-                "contact_ratio": 0.01 if damp else 0.0,
+                "bending_mode_ratio": 0.01 if damp else 0.0,
+                "contact_dashpot_ratio": 0.01 if damp else 0.0,
             },
         }
     )

@@ -77,15 +77,18 @@ GOOD = "n_cylinders: 5\nlength_first: 90 mm\nlength_last: 110 mm\n"
         (GOOD + "density_factors: {2: -1}\n", "density_factors"),
         (GOOD + "contact_gaps: {2: 1 um}\n", "contact_gaps"),  # needs preload 0
         (
-            GOOD + "preload: 0 N\ncontact_gaps: {5: 1 um}\ndamping: {contact_ratio: 0}\n",
+            GOOD + "preload: 0 N\ncontact_gaps: {5: 1 um}\ndamping: {contact_dashpot_ratio: 0}\n",
             "contact_gaps",
         ),
         (
-            GOOD + "preload: 0 N\ncontact_gaps: {2: 1}\ndamping: {contact_ratio: 0}\n",
+            GOOD + "preload: 0 N\ncontact_gaps: {2: 1}\ndamping: {contact_dashpot_ratio: 0}\n",
             "contact_gaps",
         ),
         (GOOD + "preload: -1 N\n", "preload"),
-        (GOOD + "preload: 0 N\n", "damping.contact_ratio"),
+        (
+            GOOD + "preload: 0 N\ndamping: {contact_dashpot_ratio: 0.005}\n",
+            "damping.contact_dashpot_ratio",
+        ),
     ],
 )
 def test_bad_chain_additions_are_one_line(tmp_path: Path, text: str, field: str) -> None:
@@ -100,7 +103,7 @@ def test_bad_chain_additions_are_one_line(tmp_path: Path, text: str, field: str)
 def test_chain_additions_round_trip(tmp_path: Path) -> None:
     text = (
         GOOD + "preload: 0 N\ncontact_gaps: {2: 1 um}\ndensity_factors: {3: 10}\n"
-        "contact_stiffness_factor: 2\ndamping: {contact_ratio: 0}\n"
+        "contact_stiffness_factor: 2\ndamping: {contact_dashpot_ratio: 0}\n"
     )
     path = tmp_path / "chain.yaml"
     path.write_text(text, encoding="utf-8")
