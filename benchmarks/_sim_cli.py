@@ -21,19 +21,19 @@ def emulator_outputs(inst: Any) -> dict[int, bool]:
 
 def _connect(*args: Any, **kwargs: Any) -> Any:
     """run_protocol's own connect, keeping the assembled bench (imported only now)."""
-    import daq.bench_assembly
+    import daq.connect
 
-    real = daq.bench_assembly.assemble
+    real = daq.connect.connect_bench
 
     def keep(*a: Any, **k: Any) -> Any:
         _made.append(real(*a, **k))
         return _made[-1]
 
-    daq.bench_assembly.assemble = keep  # type: ignore[assignment]
+    daq.connect.connect_bench = keep  # type: ignore[assignment]
     try:
         return _real_connect(*args, **kwargs)
     finally:
-        daq.bench_assembly.assemble = real  # type: ignore[assignment]
+        daq.connect.connect_bench = real  # type: ignore[assignment]
 
 
 _real_connect = rp._connect

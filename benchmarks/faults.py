@@ -120,23 +120,23 @@ def _kept(path: Path, ref: dict[str, np.ndarray]) -> tuple[str, bool]:
 
 def _in_process(argv: list[str]) -> tuple[int, str, Any]:
     """``run_protocol argv`` in this process: exit status, last line, the assembled bench."""
-    import daq.bench_assembly
+    import daq.connect
     from daq.cli import run_protocol as rp
 
     made: list[Any] = []
-    real = daq.bench_assembly.assemble
+    real = daq.connect.connect_bench
 
     def keep(*a: Any, **k: Any) -> Any:
         made.append(real(*a, **k))
         return made[-1]
 
     out, err = io.StringIO(), io.StringIO()
-    daq.bench_assembly.assemble = keep  # type: ignore[assignment]
+    daq.connect.connect_bench = keep  # type: ignore[assignment]
     try:
         with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
             code = rp.main(argv)
     finally:
-        daq.bench_assembly.assemble = real  # type: ignore[assignment]
+        daq.connect.connect_bench = real  # type: ignore[assignment]
     lines = (out.getvalue() + err.getvalue()).strip().splitlines()
     last = next((ln for ln in reversed(lines) if not ln.startswith("warning:")), "")
     return code, last, made[-1] if made else None

@@ -14,10 +14,10 @@ from typing import Any
 
 import numpy as np
 
+from daq.connect import connect_bench
+from daq.engine.instruments import BenchInstruments
 from instruments.burst import Burst
 from instruments.interfaces import AcquisitionConfig, BurstConfig
-from sim_backend.bench import SimWorld, SimWorldConfig
-from sim_backend.bench.rig import build_rig
 
 F_IN_HZ = {"ltr": 8.92e3, "rtl": 6.63e3}
 AMPLITUDES_VPP = tuple(float(a) for a in np.geomspace(0.05, 10.0, 8))
@@ -28,10 +28,10 @@ PRETRIGGER = 100
 VIBROMETER_RANGE = "VD-09 50mm/s/V"
 
 
-def scan(world: SimWorld) -> dict[str, Any]:
+def scan(rig: BenchInstruments) -> dict[str, Any]:
     """Measure every (direction, amplitude, cylinder) with averages; returns counts and a
     per-direction summary (mean velocity record is kept only as energy figures)."""
-    rig = build_rig(world)
+    world = rig.world
     gen, stage, dig = rig.generator, rig.stage, rig.digitiser
     positions = world.cylinder_positions_m
     n_samples = round(DURATION_S * RATE_HZ) + PRETRIGGER
@@ -71,14 +71,16 @@ def scan(world: SimWorld) -> dict[str, Any]:
                     n_points += 1
                 gen.output(channel, False)
     finally:
-        rig.safe_state()
+        for inst in rig.all().values():
+            inst.safe_state()
     return {"points": n_points, "energy": energy}
 
 
 def run() -> dict[str, Any]:
-    world = SimWorld(SimWorldConfig(seed=0, speedup=0.0))
+    rig = connect_bench(seed=0)  # the shipped simulated bench (speed-up 0)
+    world = rig.world
     t0 = time.perf_counter()
-    result = scan(world)
+    result = scan(rig)
     wall = time.perf_counter() - t0
     stats = world.dem_stats
     energy = result["energy"]

@@ -4,7 +4,7 @@ A bench file (YAML) is the one source of truth for a physical (or simulated) ben
 direction-to-channel map, amplifier gain and piezo limit, generator limits, vibrometer range,
 digitiser channels and rate, the stage positions of the cylinders and the soft limits. With
 ``simulated: true`` the ``simulation:`` section configures the simulated world
-(``sim_backend.bench.SimWorldConfig``). See ``protocols/benches/sim_bench.yaml``.
+(``sim_backend.simbench.SimWorldConfig``). See ``protocols/benches/sim_bench.yaml``.
 """
 
 from __future__ import annotations

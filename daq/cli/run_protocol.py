@@ -175,9 +175,9 @@ def _load(args: argparse.Namespace) -> tuple[Any, Any, Any]:
             bf = load_bench(None, chain_set=settings)
         assert pf is not None and bf is not None
         if bf.bench.chain_set:
-            from daq.bench_assembly import bench_chain_spec
+            from daq.chain_info import chain_spec
 
-            bench_chain_spec(bf)  # a bad chain setting is refused before anything runs
+            chain_spec(bf)  # a bad chain setting is refused before anything runs
         plan = make_plan(pf, bf)
     except ConfigError as exc:
         raise CliError(str(exc)) from None
@@ -337,13 +337,13 @@ def _connect(
     seed: int | None,
     accept_bench_change: bool,
 ) -> tuple[Any, Any]:
-    from daq.bench_assembly import assemble
+    from daq.connect import connect_bench
     from daq.engine import RunEngine
     from instruments.errors import InstrumentError
     from protocols.yamlfile import ConfigError
 
     try:
-        instruments = assemble(bf, seed=seed)
+        instruments = connect_bench(bf, seed=seed)
     except (ConfigError, InstrumentError) as exc:
         raise CliError(str(exc).splitlines()[0]) from None
     engine = RunEngine(

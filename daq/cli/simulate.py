@@ -138,7 +138,7 @@ def _describe(burst: Any) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from daq.bench_assembly import model_chain_info
+    from daq.chain_info import model_chain_info
     from protocols.runfile import RunFileWriter, ScanSpec
     from sim_backend import dem
 

@@ -121,7 +121,7 @@ class RunEngine:
     protocol, bench:
         The validated protocol and bench files (their texts go into the file).
     instruments:
-        The assembled bench (:func:`daq.bench_assembly.assemble`, or fakes in tests).
+        The assembled bench (:func:`daq.connect.connect_bench`, or fakes in tests).
     out_path:
         The run file to create, or (``resume=True``) the interrupted one to continue.
     resume:

@@ -1,4 +1,7 @@
-"""The instruments of an assembled bench, as the run engine sees them (typed by the Protocols)."""
+"""The connected bench: the instruments the run engine drives (typed by the Protocols).
+
+Made by :func:`daq.connect.connect_bench` from a bench file (tests may build one from fakes).
+"""
 
 from __future__ import annotations
 
@@ -29,7 +32,7 @@ class BenchInstruments:
         Waits ``dt`` seconds. ``None``: wall-clock waits (interrupted by abort). The simulated
         bench passes its clock's ``sleep`` so settling costs no wall time.
     world:
-        The simulated world (``sim_backend.bench.SimWorld``) or ``None``.
+        The simulated world (``sim_backend.simbench.SimWorld``) or ``None``.
     """
 
     generator: FunctionGenerator

@@ -34,7 +34,7 @@ from daq.gui.views import LiveViews
 
 __all__ = ["Assembler", "MainWindow"]
 
-#: builds the instruments of a bench file (default: :func:`daq.bench_assembly.assemble`)
+#: builds the instruments of a bench file (default: :func:`daq.connect.connect_bench`)
 Assembler = Callable[[Any, "int | None"], Any]
 
 #: ms between redraws of the live views while events arrive
@@ -42,9 +42,9 @@ REDRAW_MS = 100
 
 
 def _default_assembler(bf: Any, seed: int | None) -> Any:
-    from daq.bench_assembly import assemble
+    from daq.connect import connect_bench
 
-    return assemble(bf, seed=seed)
+    return connect_bench(bf, seed=seed)
 
 
 def shown_path(path: str | Path) -> str:
@@ -221,7 +221,7 @@ class MainWindow(QMainWindow):
         return True
 
     def _load_chain(self, bf: Any) -> None:
-        from daq.bench_assembly import chain_info
+        from daq.chain_info import chain_info
 
         def done(chain: Any, err: BaseException | None) -> None:
             if bf is not self.bench_file:
@@ -239,10 +239,10 @@ class MainWindow(QMainWindow):
     def _set_model_for_bench(self, bf: Any) -> None:
         """The "model" overlay of a run about to start: the bench's chain, gain and stroke."""
         from analysis.model_overlay import ModelOverlay
-        from daq.bench_assembly import _chain_spec
+        from daq.chain_info import chain_spec
 
         try:
-            overlay = ModelOverlay.for_bench(bf.bench, self.protocol_file.protocol, _chain_spec(bf))
+            overlay = ModelOverlay.for_bench(bf.bench, self.protocol_file.protocol, chain_spec(bf))
         except Exception as exc:
             self.log(f"model overlay unavailable: {exc}", "warning")
             overlay = None

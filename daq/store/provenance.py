@@ -7,7 +7,7 @@ Root attributes, plain strings and numbers so that plain h5py (or HDFView) reads
 libraries the data went through). The protocol and bench files as written, each instrument's
 identity and settings read back from it, and the simulated world's model parameters are in
 ``protocol_yaml``, ``bench_yaml`` and ``/snapshot`` (see :meth:`RunEngine` and
-:func:`daq.bench_assembly.assemble`).
+:func:`daq.connect.connect_bench`).
 """
 
 from __future__ import annotations

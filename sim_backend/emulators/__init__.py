@@ -1,10 +1,10 @@
 """Wire-level emulators of the bench instruments, and a Transport onto them.
 
 The real drivers (``instruments.keysight/polytec/zaber``) run on :class:`SimTransport`
-unchanged. The emulators know nothing about the DEM: the simulated world couples them.
+unchanged. The emulators know nothing about the DEM: the simulated rig
+(``sim_backend.simbench``) couples them to one world and one clock.
 """
 
-from sim_backend.emulators.bench import EmulatedInstruments, make_emulators
 from sim_backend.emulators.clock import SimClock
 from sim_backend.emulators.keysight import ChannelState, KeysightEmulator
 from sim_backend.emulators.polytec import PolytecEmulator
@@ -13,12 +13,10 @@ from sim_backend.emulators.zaber import ZaberEmulator
 
 __all__ = [
     "ChannelState",
-    "EmulatedInstruments",
     "Emulator",
     "KeysightEmulator",
     "PolytecEmulator",
     "SimClock",
     "SimTransport",
     "ZaberEmulator",
-    "make_emulators",
 ]

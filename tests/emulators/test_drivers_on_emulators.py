@@ -167,19 +167,3 @@ def test_stage_move_timeout_stops_axis(clock: SimClock) -> None:
     with pytest.raises(InstrumentTimeout, match="not finished"):
         stage.move_to(0.1)
     assert not emu.busy()
-
-
-def test_make_emulators_opens_all_drivers() -> None:
-    from sim_backend.emulators import make_emulators
-
-    emus = make_emulators(stage_travel_m=(0.0, 0.5))
-    gen, vib, stage = emus.drivers(LIMITS, ZaberSettings(soft_limits_m=(0.01, 0.2)))
-    assert gen.identify().startswith("Keysight")
-    assert vib.sensitivity_m_per_s_per_V() == pytest.approx(0.01)
-    stage.home()
-    stage.move_to(0.02)
-    assert emus.stage.position_m() == pytest.approx(0.02, abs=1e-6)
-    assert emus.clock.now() > 0.0
-    assert emus.transport("stage") is emus.stage_transport
-    with pytest.raises(ValueError, match="no emulated instrument 'laser'"):
-        emus.transport("laser")

@@ -64,11 +64,11 @@ def test_serial_emulators_answer_only_at_their_baud_rate() -> None:
 
 
 def test_a_wrong_baud_rate_in_the_bench_file_fails_on_the_simulated_bench() -> None:
-    from daq.bench_assembly import assemble
+    from daq.connect import connect_bench
     from instruments.errors import InstrumentTimeout
     from protocols.bench import default_bench_path, parse_bench
 
     text = default_bench_path().read_text()
     text = text.replace("baud_rate: 115200              # Zaber", "baud_rate: 9600  # Zaber")
     with pytest.raises(InstrumentTimeout, match="stage"):
-        assemble(parse_bench(text))
+        connect_bench(parse_bench(text))

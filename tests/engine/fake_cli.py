@@ -9,8 +9,8 @@ import os
 import sys
 import time
 
-import daq.bench_assembly
 import daq.cli.run_protocol as rp
+import daq.connect
 
 from .fakes import FakeWorld, Faults, fake_bench
 
@@ -20,13 +20,13 @@ WORLD = FakeWorld(
 )
 
 
-def _assemble(bf, *, seed=None, faults=None):  # type: ignore[no-untyped-def]
+def _connect(bf, *, seed=None, faults=None):  # type: ignore[no-untyped-def]
     time.sleep(float(os.environ.get("FAKE_CONNECT_S", "0")))  # a slow connect (or compile)
     WORLD.seed = seed or 0
     return fake_bench(WORLD)
 
 
-daq.bench_assembly.assemble = _assemble  # type: ignore[assignment]
+daq.connect.connect_bench = _connect  # type: ignore[assignment]
 rp.ABORT_BOUND_S = float(os.environ.get("FAKE_ABORT_BOUND_S", rp.ABORT_BOUND_S))
 
 if __name__ == "__main__":

@@ -14,7 +14,7 @@ import h5py
 import numpy as np
 import pytest
 
-import daq.bench_assembly
+import daq.connect
 from daq.cli import run_protocol as rp
 from protocols.runfile import PointState, read_run
 
@@ -39,7 +39,7 @@ def no_instruments(monkeypatch: pytest.MonkeyPatch) -> list[int]:
         calls.append(1)
         raise AssertionError("an instrument was opened")
 
-    monkeypatch.setattr(daq.bench_assembly, "assemble", forbidden)
+    monkeypatch.setattr(daq.connect, "connect_bench", forbidden)
     return calls
 
 
@@ -107,7 +107,7 @@ def test_dry_run_prints_points_and_eta(proto_file, tmp_path, capsys, no_instrume
 
 
 def test_cli_run_in_process(proto_file, tmp_path, capsys, monkeypatch) -> None:
-    monkeypatch.setattr(daq.bench_assembly, "assemble", lambda bf, **k: fake_bench(FakeWorld()))
+    monkeypatch.setattr(daq.connect, "connect_bench", lambda bf, **k: fake_bench(FakeWorld()))
     out = tmp_path / "o.h5"
     assert rp.main([str(proto_file), "--out", str(out)]) == 0
     text = capsys.readouterr().out
@@ -158,8 +158,8 @@ def test_sigkill_then_resume_equals_an_uninterrupted_run(proto_file, tmp_path, m
         assert np.all(np.isfinite(s.velocity[measured]))
         assert np.all(np.isnan(s.velocity[~measured]))
     monkeypatch.setattr(
-        daq.bench_assembly,
-        "assemble",
+        daq.connect,
+        "connect_bench",
         lambda bf, seed=None, **k: fake_bench(FakeWorld(seed=seed or 0)),
     )
     assert rp.main([str(proto_file), "--resume", str(killed), "--quiet"]) == 0  # seed from the file
@@ -224,8 +224,8 @@ def test_resume_alone_takes_protocol_and_bench_from_the_file(
     proc.wait(10)
     proto_file.unlink()  # the protocol file is gone: the run file holds it
     monkeypatch.setattr(
-        daq.bench_assembly,
-        "assemble",
+        daq.connect,
+        "connect_bench",
         lambda bf, seed=None, **k: fake_bench(FakeWorld(seed=seed or 0)),
     )
     assert rp.main(["--resume", str(killed), "--dry-run"]) == 0

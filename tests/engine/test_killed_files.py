@@ -15,7 +15,7 @@ import h5py
 import numpy as np
 import pytest
 
-import daq.bench_assembly
+import daq.connect
 from daq.cli import run_protocol as rp
 from daq.cli.biafc import main as biafc
 from daq.store.lock import lock_path
@@ -90,7 +90,7 @@ def test_resume_of_a_killed_file_leaves_it_readable_by_plain_h5py(
     killed = tmp_path / "k.h5"
     _killed_run(proto_file, killed)
     monkeypatch.setattr(
-        daq.bench_assembly, "assemble", lambda bf, seed=None, **k: fake_bench(FakeWorld(seed=seed))
+        daq.connect, "connect_bench", lambda bf, seed=None, **k: fake_bench(FakeWorld(seed=seed))
     )
     assert rp.main([str(proto_file), "--resume", str(killed), "--quiet"]) == 0
     assert _plain_h5py_opens(killed)

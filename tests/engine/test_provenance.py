@@ -7,7 +7,7 @@ from pathlib import Path
 
 import h5py
 
-from daq.bench_assembly import assemble
+from daq.connect import connect_bench
 from daq.engine import RunEngine
 from protocols.bench import load_bench
 from protocols.schema import load_protocol
@@ -18,7 +18,7 @@ ROOT = Path(__file__).resolve().parents[2] / "protocols"
 def test_a_sim_run_file_records_what_reproduces_it(tmp_path: Path) -> None:
     pf, bf = load_protocol(ROOT / "smoke.yaml"), load_bench()
     out = tmp_path / "p.h5"
-    assert RunEngine(pf, bf, assemble(bf, seed=3), out, seed=3).run().status == "complete"
+    assert RunEngine(pf, bf, connect_bench(bf, seed=3), out, seed=3).run().status == "complete"
     with h5py.File(out, "r") as f:  # plain h5py, no SWMR, no biafc code
         a = dict(f.attrs)
         snap = json.loads(f["snapshot"].attrs["json"])

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import daq.bench_assembly
+import daq.connect
 from daq.cli import run_protocol as rp
 from daq.engine import RunEngine
 from daq.engine.outcome import ExitCode
@@ -41,13 +41,13 @@ def _use(monkeypatch: pytest.MonkeyPatch, *worlds: FakeWorld) -> list[FakeWorld]
     queue = list(worlds)
     used: list[FakeWorld] = []
 
-    def assemble(bf, seed=None, **k):  # type: ignore[no-untyped-def]
+    def connect_bench(bf, seed=None, **k):  # type: ignore[no-untyped-def]
         w = queue.pop(0) if queue else FakeWorld()
         w.seed = seed or 0
         used.append(w)
         return fake_bench(w)
 
-    monkeypatch.setattr(daq.bench_assembly, "assemble", assemble)
+    monkeypatch.setattr(daq.connect, "connect_bench", connect_bench)
     return used
 
 

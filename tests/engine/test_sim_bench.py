@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from daq.bench_assembly import assemble
 from daq.cli import run_protocol as rp
+from daq.connect import connect_bench
 from daq.engine import EventKind, RunEngine, RunEvent
 from protocols.bench import load_bench
 from protocols.runfile import PointState, read_run
@@ -68,7 +68,7 @@ def test_smoke_reproduces_the_dem(tmp_path: Path) -> None:
 def _engine(tmp_path: Path, faults: dict) -> tuple[RunEngine, object]:
     pf = load_protocol(ROOT / "smoke.yaml")
     bf = load_bench()
-    inst = assemble(bf, faults=faults)
+    inst = connect_bench(bf, faults=faults)
     return RunEngine(pf, bf, inst, tmp_path / "run.h5"), inst
 
 
@@ -157,16 +157,16 @@ def test_sigint_aborts_and_the_emulated_generator_is_off(
 
     import h5py
 
-    import daq.bench_assembly
+    import daq.connect
 
     made: list = []
-    real = daq.bench_assembly.assemble
+    real = daq.connect.connect_bench
 
     def keep(*a, **k):  # type: ignore[no-untyped-def]
         made.append(real(*a, **k))
         return made[-1]
 
-    monkeypatch.setattr(daq.bench_assembly, "assemble", keep)
+    monkeypatch.setattr(daq.connect, "connect_bench", keep)
     bench = tmp_path / "slow_bench.yaml"
     bench.write_text(load_bench().text.replace("speedup: 0 ", "speedup: 20 "))
     out = tmp_path / "int.h5"

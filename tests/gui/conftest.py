@@ -11,7 +11,7 @@ from typing import Any
 import pytest
 from PySide6.QtCore import QElapsedTimer, QTimer
 
-from daq.bench_assembly import assemble
+from daq.connect import connect_bench
 from daq.gui.main_window import MainWindow, shown_path
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -48,7 +48,7 @@ def make_assembler(read_sleep_s: float = 0.0) -> Callable[[Any, int | None], Any
     """The simulated bench, its digitiser slowed by ``read_sleep_s`` of wall time per read."""
 
     def sim(bf: Any, seed: int | None) -> Any:
-        inst = assemble(bf, seed=seed)
+        inst = connect_bench(bf, seed=seed)
         if read_sleep_s:
             inst.digitiser = SlowDigitiser(inst.digitiser, read_sleep_s)
         return inst

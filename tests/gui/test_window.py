@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from daq.bench_assembly import assemble
+from daq.connect import connect_bench
 from daq.gui.main_window import MainWindow
 from protocols.runfile import PointState, read_run
 
@@ -195,7 +195,9 @@ def test_an_unsafe_end_is_shown_in_red_naming_the_output(qtbot: Any, tmp_path: P
     what to switch off by hand, as the CLI does, and not "complete"."""
 
     def silent(bf: Any, seed: int | None) -> Any:
-        return assemble(bf, seed=seed, faults={"generator_silent": True, "after_acquisitions": 3})
+        return connect_bench(
+            bf, seed=seed, faults={"generator_silent": True, "after_acquisitions": 3}
+        )
 
     win = MainWindow(None, SMOKE, assembler=silent)
     win.confirm_close = lambda: True  # type: ignore[method-assign]

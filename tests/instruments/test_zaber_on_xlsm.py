@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 import protocols
-from daq.bench_assembly import stage_settings
+from daq.connect import stage_settings
 from instruments.errors import InstrumentTimeout, LimitError
 from instruments.zaber import ZaberStage
 from protocols.bench import BenchSpec, load_bench

@@ -15,10 +15,10 @@ import numpy as np
 
 from instruments.errors import InstrumentError, InstrumentTimeout, LimitError
 from instruments.interfaces import Acquisition, AcquisitionConfig
-from sim_backend.bench.signal_chain import coerce_input_range, coerce_sample_rate
+from sim_backend.simbench.signal_chain import coerce_input_range, coerce_sample_rate
 
 if TYPE_CHECKING:
-    from sim_backend.bench.world import SimWorld
+    from sim_backend.simbench.world import SimWorld
 
 __all__ = ["SimDigitiser"]
 

@@ -1,6 +1,6 @@
 """Settings of the simulated world: one frozen, self-validating object, SI units throughout.
 
-The run engine's bench assembly (``daq/``) builds a :class:`SimWorldConfig` from the simulated
+The bench connection (``daq.connect``) builds a :class:`SimWorldConfig` from the simulated
 bench file; tests build one directly. Every field names its unit; a bad value is refused with a
 one-line message naming the field before anything is simulated.
 """
@@ -13,8 +13,8 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any
 
-from sim_backend.bench.actuator import ActuatorModel
-from sim_backend.bench.faults import FaultPlan
+from sim_backend.simbench.actuator import ActuatorModel
+from sim_backend.simbench.faults import FaultPlan
 
 __all__ = ["DIRECTIONS", "SimWorldConfig"]
 

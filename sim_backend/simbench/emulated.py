@@ -1,4 +1,8 @@
-"""Glue between the world and the wire-level emulators (``sim_backend.emulators``).
+"""The simulated rig's instruments: the wire-level emulators (``sim_backend.emulators``) of one
+world, on one clock, and the transports the real drivers talk to.
+
+The drivers themselves are opened by the one bench connection, ``daq.connect.connect_bench``,
+from a bench file, exactly as on the rig.
 
 The world owns one emulator per instrument and one shared :class:`SimClock`. Each transport it
 hands out is a :class:`SimTransport` wrapped so that, before every message, the world pushes its
@@ -23,22 +27,20 @@ from sim_backend.emulators import (
 )
 
 if TYPE_CHECKING:
-    from sim_backend.bench.world import ChannelPlay, SimWorld
+    from sim_backend.simbench.world import ChannelPlay, SimWorld
 
-__all__ = ["INSTRUMENTS", "Instruments", "build_drivers"]
+__all__ = ["INSTRUMENTS", "EmulatedInstruments", "WorldTransport"]
 
 INSTRUMENTS: tuple[str, ...] = ("generator", "vibrometer", "stage")
 #: default transport timeouts (s, simulated)
 TIMEOUT_S = {"generator": 5.0, "vibrometer": 2.0, "stage": 2.0}
-#: piezo voltage limit used by :func:`build_drivers` (a typical 150 V stack)
-PIEZO_MAX_V = 150.0
 _SCPI_ERROR = re.compile(r'^\s*([+-]?\d+)\s*,\s*"?(.*?)"?\s*$')
 
 
 class WorldTransport:
     """A :class:`SimTransport` that lets the world update its emulator before each message."""
 
-    def __init__(self, inner: SimTransport, instruments: Instruments, which: str) -> None:
+    def __init__(self, inner: SimTransport, instruments: EmulatedInstruments, which: str) -> None:
         self._inner = inner
         self._inst = instruments
         self._which = which
@@ -78,7 +80,7 @@ class WorldTransport:
         self._inner.close()
 
 
-class Instruments:
+class EmulatedInstruments:
     """The emulators of one world, their clock and transports."""
 
     def __init__(self, world: SimWorld) -> None:
@@ -161,7 +163,7 @@ class Instruments:
         return self.vibrometer.range_name, float(self.vibrometer.delay_s)
 
     def _on_trigger(self, fired: tuple[int, ...]) -> None:
-        from sim_backend.bench.world import ChannelPlay
+        from sim_backend.simbench.world import ChannelPlay
 
         plays: list[ChannelPlay] = []
         for n in fired:
@@ -185,33 +187,3 @@ class Instruments:
                 )
             )
         self.world.fire_trigger(plays)
-
-
-def build_drivers(world: SimWorld) -> tuple[Any, Any, Any]:
-    """The real generator, vibrometer and stage drivers on the world's transports, with settings
-    consistent with the world (amplifier gain, stage speed and settling, simulated clock)."""
-    from instruments.keysight import GeneratorLimits, KeysightGenerator
-    from instruments.polytec import PolytecVibrometer
-    from instruments.zaber import ZaberSettings, ZaberStage
-
-    cfg = world.config
-    limits = GeneratorLimits(
-        max_piezo_V=PIEZO_MAX_V, amplifier_gain=cfg.actuator.amplifier_gain_V_per_V
-    )
-    generator = KeysightGenerator(world.transport("generator"), limits)
-    vibrometer = PolytecVibrometer(world.transport("vibrometer"))
-    stage = ZaberStage(
-        world.transport("stage"),
-        ZaberSettings(
-            model=world._inst.stage.model,  # the emulated stage names itself
-            speed_m_per_s=cfg.stage_speed_m_per_s,
-            settle_s=cfg.stage_settle_s,
-            soft_limits_m=cfg.stage_travel_m,
-            clock=world.clock,
-        ),
-    )
-    # connect as on the rig: *CLS and identity, echo off, stage identity against the positions
-    generator.connect()
-    vibrometer.connect()
-    stage.connect([float(p) for p in world.cylinder_positions_m])
-    return generator, vibrometer, stage

@@ -1,7 +1,7 @@
 """Fault injection for the simulated bench.
 
 A :class:`FaultPlan` says which faults the simulated instruments show. It is mutable on purpose:
-a test (or the bench file, through the run engine's bench assembly) switches faults on and off
+a test (or the bench file, through the bench connection, ``daq.connect``) switches faults on and off
 while a run is in progress, and the simulated instruments read it at every command.
 
 Each fault becomes active once ``after_acquisitions`` digitiser records have been read in the

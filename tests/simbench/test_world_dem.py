@@ -10,7 +10,7 @@ import pytest
 from instruments.burst import Burst, burst_samples
 from instruments.interfaces import Acquisition, AcquisitionConfig
 from sim_backend import dem
-from sim_backend.bench import ChannelPlay, SimWorld, SimWorldConfig
+from sim_backend.simbench import ChannelPlay, SimWorld, SimWorldConfig
 
 RATE = 200e3
 ACQ = AcquisitionConfig(sample_rate_Hz=RATE, n_samples=6100, n_pretrigger=100)

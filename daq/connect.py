@@ -1,84 +1,57 @@
-"""Bench assembly: a bench file -> the four instruments the run engine drives, real or simulated.
+"""The one way from a bench file to connected drivers: :func:`connect_bench`.
 
-``simulated: true``: one :class:`sim_backend.bench.SimWorld` built from the bench file's
+The lab, the simulated bench, the GUI, ``run_protocol``, ``biafc check``, the benchmarks and the
+tests all open their instruments here, so the drivers on the simulated rig get exactly the
+settings they would get on the lab's rig from the same fields.
+
+Three things are called "bench"; this module joins them:
+
+- a **bench file** (``protocols/benches/*.yaml``, schema ``protocols/bench.py``) describes a
+  bench: addresses, limits, calibration, channels, cylinder positions;
+- the **simulated rig** (``sim_backend.simbench``) is the world of emulated instruments and the
+  DEM behind a bench file with ``simulated: true``;
+- the **connected bench** (:class:`daq.engine.instruments.BenchInstruments`) is what the run
+  engine drives: the four instruments, the chain's model and how to wait.
+
+``simulated: true``: one :class:`sim_backend.simbench.SimWorld` built from the bench file's
 ``simulation:`` section, the real drivers on its emulated transports, and its simulated
 digitiser; waits run on the world's simulated clock. Otherwise: the drivers on real transports
-(``open_transport``) and the NI-DAQmx digitiser (imported lazily).
+(``instruments.transport.open_transport``) and the NI-DAQmx digitiser (imported lazily).
 
-The drivers are imported by name when a bench is assembled, so the rest of the engine (plan,
-dry run, validation) works even where a driver stack is not installed.
+The drivers are imported when a bench is connected, so the rest of the engine (plan, dry run,
+validation) works where a driver stack is not installed.
 """
 
 from __future__ import annotations
 
 import importlib
 from collections.abc import Mapping
+from pathlib import Path
 from typing import Any
 
-import numpy as np
-
+from daq.chain_info import chain_info, chain_spec
 from daq.engine.instruments import BenchInstruments
-from protocols.bench import BenchFile, BenchSpec
-from protocols.runfile import ChainInfo
+from protocols.bench import BenchFile, BenchSpec, load_bench
 from protocols.yamlfile import ConfigError
 
 __all__ = [
-    "AssemblyError",
-    "assemble",
-    "bench_chain_spec",
-    "chain_info",
-    "model_chain_info",
+    "ConnectError",
+    "build_drivers",
+    "connect_bench",
     "sim_world_config",
     "stage_settings",
 ]
 
 
-class AssemblyError(ConfigError):
-    """The bench cannot be assembled (missing driver, bad simulation setting); one line."""
-
-
-def _chain_spec(bf: BenchFile) -> Any:
-    from sim_backend import dem
-
-    path = bf.chain_path()
-    try:
-        return dem.load_chain_with_settings(path, bf.bench.chain_set)
-    except (dem.ChainFileError, OSError) as exc:
-        field = "chain_set" if bf.bench.chain_set else "chain"
-        raise bf.doc.error((field,), str(exc)) from None
-
-
-def bench_chain_spec(bf: BenchFile) -> Any:
-    """The bench's chain spec (its chain file with its ``chain_set``), validated; a bad one
-    raises a one-line :class:`ConfigError` naming the bench file's field."""
-    return _chain_spec(bf)
-
-
-def chain_info(bf: BenchFile, n_bands: int = 3) -> ChainInfo:
-    """The model's view of the bench's chain (lengths, contact constants, quasi-band edges)."""
-    from sim_backend import dem
-
-    chain = dem.build_chain(_chain_spec(bf))
-    return model_chain_info(chain, dem.quasi_bands(chain, min(n_bands, chain.n_modes + 1)))
-
-
-def model_chain_info(chain: Any, bands: Any) -> ChainInfo:
-    """The run file's ``/chain`` of a built ``sim_backend.dem.Chain`` and its ``Bands``."""
-    return ChainInfo(
-        lengths_m=np.asarray(chain.lengths_m, dtype=np.float64),
-        diameter_m=float(chain.diameter_m),
-        f0_N=float(chain.f0_N),
-        beta_c=float(chain.beta_c),
-        onset_Hz=np.asarray(bands.onset_Hz, dtype=np.float64),
-        cutoff_Hz=np.asarray(bands.cutoff_Hz, dtype=np.float64),
-    )
+class ConnectError(ConfigError):
+    """The bench cannot be connected (missing driver, bad simulation setting); one line."""
 
 
 def sim_world_config(
     bf: BenchFile, *, seed: int | None = None, faults: Mapping[str, Any] | None = None
 ) -> Any:
     """The :class:`SimWorldConfig` of a simulated bench file (``seed``/``faults`` override)."""
-    from sim_backend.bench import ActuatorModel, FaultPlan, SimWorldConfig
+    from sim_backend.simbench import ActuatorModel, FaultPlan, SimWorldConfig
 
     b: BenchSpec = bf.bench
     sim = b.simulation
@@ -97,7 +70,7 @@ def sim_world_config(
         raise bf.doc.error(("simulation", "faults"), str(exc)) from None
     try:
         return SimWorldConfig(
-            chain_spec=_chain_spec(bf),
+            chain_spec=chain_spec(bf),
             direction_channel={str(k): int(v) for k, v in b.direction_channel.items()},
             actuator=actuator,
             cylinder_positions_m=tuple(float(p) for p in b.positions_m()),
@@ -126,7 +99,7 @@ def _import(module: str, name: str) -> Any:
     try:
         return getattr(importlib.import_module(module), name)
     except (ImportError, AttributeError) as exc:
-        raise AssemblyError(f"driver {module}.{name} is not available ({exc})") from None
+        raise ConnectError(f"driver {module}.{name} is not available ({exc})") from None
 
 
 def stage_settings(b: BenchSpec, clock: Any = None) -> Any:
@@ -177,14 +150,28 @@ def build_drivers(
     return generator, vibrometer, stage
 
 
-def assemble(
-    bf: BenchFile, *, seed: int | None = None, faults: Mapping[str, Any] | None = None
+def _bench_file(bench: BenchFile | str | Path | None) -> BenchFile:
+    return bench if isinstance(bench, BenchFile) else load_bench(bench)
+
+
+def connect_bench(
+    bench: BenchFile | str | Path | None = None,
+    *,
+    seed: int | None = None,
+    faults: Mapping[str, Any] | None = None,
 ) -> BenchInstruments:
-    """Open every instrument of the bench (a simulated world when ``simulated: true``)."""
+    """Open every instrument of a bench file and return the connected bench.
+
+    ``bench``: a loaded :class:`BenchFile`, a path to one, or ``None`` for the shipped simulated
+    bench (``protocols/benches/sim_bench.yaml``). ``seed`` and ``faults`` override the
+    ``simulation:`` section of a simulated bench (ignored on a real one). Nothing moves and no
+    output is switched on: the drivers are opened and the generator and vibrometer identified.
+    """
+    bf = _bench_file(bench)
     b = bf.bench
     chain = chain_info(bf)
     if b.simulated:
-        from sim_backend.bench import SimWorld
+        from sim_backend.simbench import SimWorld
 
         world = SimWorld(sim_world_config(bf, seed=seed, faults=faults))
         try:
@@ -195,7 +182,7 @@ def assemble(
             }
             generator, vibrometer, stage = build_drivers(b, transports, world.clock)
         except (ImportError, AttributeError, NotImplementedError) as exc:
-            raise AssemblyError(
+            raise ConnectError(
                 f"simulated bench: instrument drivers/emulators not available ({exc})"
             ) from None
         return BenchInstruments(

@@ -11,9 +11,9 @@ import pytest
 from instruments.burst import Burst, burst_samples
 from instruments.errors import InstrumentError, InstrumentTimeout, LimitError
 from instruments.interfaces import AcquisitionConfig, Digitiser
-from sim_backend.bench import ActuatorModel, ChannelPlay, FaultPlan, SimWorld, SimWorldConfig
-from sim_backend.bench.dem_cache import DemKey, DemRecord
-from sim_backend.bench.signal_chain import (
+from sim_backend.simbench import ActuatorModel, ChannelPlay, FaultPlan, SimWorld, SimWorldConfig
+from sim_backend.simbench.dem_cache import DemKey, DemRecord
+from sim_backend.simbench.signal_chain import (
     coerce_input_range,
     coerce_sample_rate,
     decoder_output,

@@ -33,8 +33,8 @@ from numpy.typing import NDArray
 
 from instruments.errors import InstrumentError
 from instruments.interfaces import AcquisitionConfig
-from sim_backend.bench.config import SimWorldConfig
-from sim_backend.bench.dem_cache import (
+from sim_backend.simbench.config import SimWorldConfig
+from sim_backend.simbench.dem_cache import (
     DemKey,
     DemRunner,
     DemStats,
@@ -42,13 +42,13 @@ from sim_backend.bench.dem_cache import (
     dem_simulator,
     waveform_digest,
 )
-from sim_backend.bench.digitiser import SimDigitiser
-from sim_backend.bench.faults import FaultPlan
-from sim_backend.bench.signal_chain import decoder_output, digitise, on_grid
+from sim_backend.simbench.digitiser import SimDigitiser
+from sim_backend.simbench.faults import FaultPlan
+from sim_backend.simbench.signal_chain import decoder_output, digitise, on_grid
 
 if TYPE_CHECKING:
-    from sim_backend.bench._instruments import WorldTransport
     from sim_backend.emulators import SimClock
+    from sim_backend.simbench.emulated import WorldTransport
 
 __all__ = ["ChannelPlay", "SimWorld", "TriggerEvent", "sensitivity_from_range_name"]
 
@@ -146,11 +146,11 @@ class SimWorld:
         )
         self._setup_instruments()
 
-    # --- instrument side (emulators, transports, clock): see _instruments ----------------------
+    # --- instrument side (emulators, transports, clock): see emulated.py ----------------------
     def _setup_instruments(self) -> None:
-        from sim_backend.bench import _instruments
+        from sim_backend.simbench import emulated
 
-        self._inst = _instruments.Instruments(self)
+        self._inst = emulated.EmulatedInstruments(self)
         #: the simulated clock shared by the emulators, the drivers' polling and the digitiser
         self.clock: SimClock = self._inst.clock
 

@@ -8,6 +8,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from daq.connect import connect_bench
+from daq.engine.instruments import BenchInstruments as SimRig
 from instruments.burst import Burst, burst_samples
 from instruments.errors import (
     InstrumentTimeout,
@@ -26,16 +28,19 @@ from instruments.interfaces import (
     Vibrometer,
 )
 from sim_backend import dem
-from sim_backend.bench import SimWorld, SimWorldConfig
-from sim_backend.bench.rig import SimRig, build_rig
+from sim_backend.simbench import SimWorld, SimWorldConfig
 
 RATE = 200e3
 ACQ = AcquisitionConfig(sample_rate_Hz=RATE, n_samples=6100, n_pretrigger=100)
 F_IN = {"ltr": 8.92e3, "rtl": 6.63e3}
+#: the most sensitive range that does not clip at 10 Vpp: the far end of the gap stays visible
+RANGE = "VD-09 10mm/s/V"
 
 
-def new_rig(**kw: object) -> SimRig:
-    rig = build_rig(SimWorld(SimWorldConfig(**kw)))  # type: ignore[arg-type]
+def new_rig(seed: int | None = None) -> SimRig:
+    """The shipped simulated bench, connected as the lab's would be (homed, digitiser set)."""
+    rig = connect_bench(seed=seed)
+    rig.vibrometer.set_velocity_range(RANGE)
     rig.stage.home()
     rig.digitiser.configure(ACQ)
     return rig
@@ -44,6 +49,12 @@ def new_rig(**kw: object) -> SimRig:
 @pytest.fixture(scope="module")
 def rig() -> SimRig:
     return new_rig(seed=5)
+
+
+def safe(rig: SimRig) -> None:
+    """Every instrument's safe state (outputs off, stage stopped, acquisition stopped)."""
+    for inst in rig.all().values():
+        inst.safe_state()
 
 
 def burst(rig: SimRig, direction: str, vpp: float) -> int:
@@ -162,9 +173,9 @@ def test_fault_generator_silent() -> None:
     rig.world.faults.generator_silent = True
     with pytest.raises(InstrumentTimeout, match="generator"):
         rig.generator.wait_complete()
-    rig.safe_state()  # never raises on a dead link
+    safe(rig)  # never raises on a dead link
     rig.world.faults.clear()  # the link comes back: the run engine's safe state reaches it
-    rig.safe_state()
+    safe(rig)
     assert outputs_off(rig)
 
 
@@ -182,7 +193,7 @@ def test_fault_stage_stall() -> None:
     rig.world.faults.stage_stall = True
     with pytest.raises(StallError):
         rig.stage.move_to(float(rig.world.cylinder_positions_m[20]))
-    rig.safe_state()
+    safe(rig)
     assert outputs_off(rig)
 
 
@@ -192,7 +203,7 @@ def test_fault_stage_loses_homing() -> None:
     rig.world.faults.stage_lost_homing = True
     with pytest.raises(NotHomedError):
         rig.stage.move_to(float(rig.world.cylinder_positions_m[10]))
-    rig.safe_state()
+    safe(rig)
     assert outputs_off(rig)
     rig.stage.home()  # homing again recovers
     rig.stage.move_to(float(rig.world.cylinder_positions_m[10]))
@@ -208,7 +219,7 @@ def test_fault_digitiser_timeout_and_nan() -> None:
     rig.world.faults.digitiser_nan = True
     acq = shot(rig, 2)
     assert np.all(np.isnan(acq.velocity_V)) and acq.meta["fault"] == "digitiser_nan"
-    rig.safe_state()
+    safe(rig)
     assert outputs_off(rig)
 
 
@@ -220,12 +231,12 @@ def test_fault_vibrometer_signal_lost() -> None:
     rig.world.faults.vibrometer_signal_lost = True
     with pytest.raises(SignalLostError):
         rig.vibrometer.check_signal()
-    rig.safe_state()
+    safe(rig)
     assert outputs_off(rig)
 
 
 def test_simulated_time_accounts_moves_without_waiting() -> None:
-    rig = new_rig(speedup=0.0)
+    rig = new_rig()  # the shipped simulated bench runs at speed-up 0
     t0 = rig.world.clock.now()
     pos = rig.world.cylinder_positions_m
     rig.stage.move_to(float(pos[30]))

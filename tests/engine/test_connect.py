@@ -1,0 +1,92 @@
+"""One way from a bench file to connected drivers (``daq.connect.connect_bench``): the simulated
+bench and the lab bench go through the same driver construction, from the same fields."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+
+import daq.connect
+from daq.connect import connect_bench
+from instruments.interfaces import Digitiser, FunctionGenerator, Stage, Vibrometer
+from protocols.bench import default_bench_path, load_bench
+from sim_backend.simbench import SimWorld, SimWorldConfig
+
+ROOT = default_bench_path().parent
+
+
+def test_default_is_the_shipped_simulated_bench_with_its_fields() -> None:
+    bench = connect_bench()
+    assert bench.backend == "sim" and bench.world is not None
+    assert isinstance(bench.generator, FunctionGenerator)
+    assert isinstance(bench.vibrometer, Vibrometer)
+    assert isinstance(bench.stage, Stage)
+    assert isinstance(bench.digitiser, Digitiser)
+    snap = bench.snapshot()
+    spec = load_bench().bench
+    assert snap["stage"]["soft_limits_m"] == pytest.approx(list(spec.stage.soft_limits))
+    assert snap["generator"]["limits"]["max_piezo_V"] == spec.amplifier.piezo_max
+    assert snap["generator"]["limits"]["amplifier_gain"] == spec.amplifier.gain
+    assert snap["vibrometer"]["velocity_range"] == spec.vibrometer.range
+    assert "33522B" in snap["generator"]["identity"]  # identified at connect
+
+
+def test_a_path_and_overrides_are_accepted() -> None:
+    bench = connect_bench(ROOT / "sim_bench.yaml", seed=7, faults={"stage_stall": True})
+    assert bench.world.config.seed == 7 and bench.world.faults.stage_stall
+
+
+def test_lab_bench_builds_its_drivers_exactly_like_the_simulated_one(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The lab bench file, with its transports replaced by a simulated rig's, gives drivers
+    with the same settings as the simulated bench file: there is one construction path."""
+    import daq.digitiser_nidaq
+    import instruments.transport
+
+    world = SimWorld(SimWorldConfig())
+    opened: dict[str, tuple[str, float]] = {}
+
+    def open_transport(resource: str, *, name: str, timeout_s: float, **kw: Any) -> Any:
+        opened[name] = (resource, timeout_s)
+        return world.transport(name)
+
+    class NoCard:
+        def __init__(self, device: str, **kw: Any) -> None:
+            self.device = device
+
+        def snapshot(self) -> dict[str, Any]:
+            return {"device": self.device}
+
+    monkeypatch.setattr(instruments.transport, "open_transport", open_transport)
+    monkeypatch.setattr(daq.digitiser_nidaq, "NidaqDigitiser", NoCard)
+    lab_file = load_bench(ROOT / "lab_bench.yaml")
+    lab = connect_bench(lab_file)
+    sim = connect_bench()
+    assert lab.backend == "hardware" and lab.world is None
+    lab_spec = lab_file.bench
+    assert opened == {
+        "generator": (lab_spec.generator.resource, lab_spec.generator.timeout),
+        "vibrometer": (lab_spec.vibrometer.resource, lab_spec.vibrometer.timeout),
+        "stage": (lab_spec.stage.resource, lab_spec.stage.timeout),
+    }
+    a, b = lab.snapshot(), sim.snapshot()
+    assert a["generator"]["limits"] == b["generator"]["limits"]
+    for key in ("soft_limits_m", "speed_m_per_s", "settle_s", "microstep_m"):
+        assert a["stage"][key] == b["stage"][key], key
+    assert a["digitiser"] == {"device": lab_spec.daq.device}
+
+
+def test_a_missing_driver_is_one_line(monkeypatch: pytest.MonkeyPatch) -> None:
+    import sys
+
+    monkeypatch.setitem(sys.modules, "daq.digitiser_nidaq", None)  # import fails
+    monkeypatch.setattr(
+        daq.connect, "build_drivers", lambda b, transports, clock=None: (None, None, None)
+    )
+    import instruments.transport
+
+    monkeypatch.setattr(instruments.transport, "open_transport", lambda *a, **k: None)
+    with pytest.raises(daq.connect.ConnectError, match=r"daq\.digitiser_nidaq\.NidaqDigitiser"):
+        connect_bench(ROOT / "lab_bench.yaml")
