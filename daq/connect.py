@@ -189,7 +189,7 @@ def connect_bench(
             generator=generator,
             vibrometer=vibrometer,
             stage=stage,
-            digitiser=world.digitiser(b.daq.device),
+            digitiser=world.digitiser(b.daq.device, b.daq.terminal_config),
             chain=chain,
             backend="sim",
             sleep=world.clock.sleep,
@@ -221,6 +221,6 @@ def connect_bench(
     }
     generator, vibrometer, stage = build_drivers(b, transports)
     digitiser = _import("daq.digitiser_nidaq", "NidaqDigitiser")(
-        b.daq.device, max_rate_Hz=b.daq.max_rate
+        b.daq.device, max_rate_Hz=b.daq.max_rate, terminal_config=b.daq.terminal_config
     )
     return BenchInstruments(generator, vibrometer, stage, digitiser, chain, "hardware")

@@ -107,11 +107,18 @@ class StageSpec(_Model):
 
 
 class DaqSpec(_Model):
+    """The digitiser: NI device, channels, trigger terminal, ``max_rate`` (the highest sample
+    rate per channel this bench allows) and ``terminal_config`` of both inputs (``RSE``,
+    ``NRSE``, ``differential``, ``pseudodifferential``, or ``default``: the device's own)."""
+
     device: str = "Dev1"
     velocity_channel: str = "Dev1/ai0"
     reference_channel: str = "Dev1/ai1"
     trigger: str = "/Dev1/PFI0"
     max_rate: SampleRate = 2.0e6
+    terminal_config: Literal["default", "RSE", "NRSE", "differential", "pseudodifferential"] = (
+        "default"
+    )
     velocity_range: Voltage = 10.0
     reference_range: Voltage = 10.0
 

@@ -38,11 +38,21 @@ class SimDigitiser:
         Device name, e.g. ``"Dev1"``; channels must be ``"<device>/ai<n>"``.
     n_channels:
         Analog inputs on the device.
+    terminal_config:
+        The inputs' terminal configuration as the bench file names it (reported only: the
+        simulated inputs have no ground loops).
     """
 
-    def __init__(self, world: SimWorld, device: str = "Dev1", n_channels: int = 8) -> None:
+    def __init__(
+        self,
+        world: SimWorld,
+        device: str = "Dev1",
+        n_channels: int = 8,
+        terminal_config: str = "default",
+    ) -> None:
         self._world = world
         self.device = device
+        self.terminal_config = terminal_config
         self.n_channels = n_channels
         self._config: AcquisitionConfig | None = None
         self._rate_Hz: float | None = None
@@ -142,6 +152,7 @@ class SimDigitiser:
         snap: dict[str, Any] = {
             "kind": "SimDigitiser",
             "device": self.device,
+            "terminal_config": self.terminal_config,
             "adc_bits": cfg.adc_bits,
             "noise_V_rms": cfg.digitiser_noise_V_rms,
             "max_rate_Hz": cfg.max_rate_Hz,

@@ -159,9 +159,9 @@ class SimWorld:
         (``baud_rate``: the line speed of a serial one, as the bench file sets it)."""
         return self._inst.transport(instrument, baud_rate)
 
-    def digitiser(self, device: str = "Dev1") -> SimDigitiser:
+    def digitiser(self, device: str = "Dev1", terminal_config: str = "default") -> SimDigitiser:
         """The simulated digitiser (same interface as the NI-DAQmx one)."""
-        return SimDigitiser(self, device=device)
+        return SimDigitiser(self, device=device, terminal_config=terminal_config)
 
     # --- geometry -------------------------------------------------------------------------------
     @property

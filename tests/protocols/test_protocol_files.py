@@ -126,7 +126,7 @@ def test_position_outside_the_stage_travel(tmp_path: Path) -> None:
     f = tmp_path / "bench.yaml"
     f.write_text(text)
     with pytest.raises(
-        ConfigError, match=r"bench.yaml:38: cylinder_positions: cylinder 30 at 484 mm"
+        ConfigError, match=r"bench.yaml:39: cylinder_positions: cylinder 30 at 484 mm"
     ):
         load_bench(f)
 
