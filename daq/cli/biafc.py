@@ -22,6 +22,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "compare": ("compare", "the model on what a run did, beside the measurement"),
     "calibrate": ("calibrate", "fit the chain model to a scan's linear points"),
     "repair": ("repair", "make a run file left by a killed writer readable by any reader"),
+    "check": ("check", "preflight: every instrument against the bench file"),
     "gui": ("gui", "the bench window"),
 }
 

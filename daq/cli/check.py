@@ -1,0 +1,126 @@
+"""``biafc check [BENCH.yaml] [--move]``: the preflight of a bench before a scan.
+
+Connects every instrument of the bench file (default: the shipped simulated bench), prints what
+each reports (identity, firmware, the settings that matter) beside what the bench file expects,
+and flags every mismatch. ``--move`` also homes the stage and fires one low-amplitude burst at
+one cylinder (signal level, velocity, carrier). Exit status: 0 all match; 1 a mismatch, or an
+instrument that did not answer; 2 the request was refused (bad bench file, bad option).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import Any, TextIO
+
+from daq.cli.biafc import CliError
+
+__all__ = ["add_arguments", "print_findings", "run"]
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "bench",
+        nargs="?",
+        default=None,
+        help="bench file (default: the shipped simulated bench, protocols/benches/sim_bench.yaml)",
+    )
+    p.add_argument(
+        "--move",
+        action="store_true",
+        help="also home the stage and fire one low-amplitude burst at one cylinder",
+    )
+    p.add_argument("--cylinder", type=int, default=1, help="cylinder of the burst (default 1)")
+    p.add_argument(
+        "--direction",
+        choices=("ltr", "rtl"),
+        default="ltr",
+        help="which end the burst enters (default ltr, at 8.92 kHz; rtl at 6.63 kHz)",
+    )
+    p.add_argument(
+        "--amplitude",
+        default="0.2 V",
+        help="generator amplitude of the burst, peak to peak, with its unit (default '0.2 V')",
+    )
+
+
+def print_findings(findings: list[Any], out: TextIO) -> None:
+    """A table: status, instrument, setting, the bench file's value, the instrument's."""
+    rows = [("", "instrument", "setting", "bench file", "instrument says")]
+    for f in findings:
+        mark = {"ok": "ok", "MISMATCH": "MISMATCH", "info": "-"}[f.status]
+        rows.append((mark, f.instrument, f.item, f.expected, f.found))
+    widths = [max(len(r[i]) for r in rows) for i in range(4)]
+    for r in rows:
+        line = "  ".join(c.ljust(w) for c, w in zip(r[:4], widths, strict=True))
+        print(f"{line}  {r[4]}".rstrip(), file=out)
+    bad = [f for f in findings if f.status == "MISMATCH"]
+    for f in bad:
+        print(
+            f"MISMATCH {f.instrument} {f.item}: {f.found} (bench file: {f.expected or '-'})"
+            f"{': ' + f.hint if f.hint else ''}",
+            file=out,
+        )
+
+
+def run(args: argparse.Namespace) -> int:
+    from daq import preflight
+    from daq.connect import connect_bench
+    from instruments.errors import InstrumentError
+    from instruments.units import UnitError, parse_quantity
+    from protocols.bench import default_bench_path, load_bench
+    from protocols.yamlfile import ConfigError
+
+    try:
+        bf = load_bench(args.bench)
+    except (ConfigError, OSError) as exc:
+        raise CliError(str(exc).splitlines()[0]) from None
+    test = None
+    if args.move:
+        try:
+            vpp = parse_quantity(args.amplitude, "voltage", field="--amplitude")
+        except UnitError as exc:
+            raise CliError(str(exc)) from None
+        f_c = 8.92e3 if args.direction == "ltr" else 6.63e3
+        test = preflight.BurstTest(args.direction, args.cylinder, f_c, amplitude_Vpp=vpp)
+        why = bf.bench.amplitude_limit_error(vpp)
+        if why is not None:
+            raise CliError(f"--amplitude: {why}")
+        if not 1 <= args.cylinder <= bf.bench.n_cylinders:
+            raise CliError(f"--cylinder {args.cylinder}: choose 1..{bf.bench.n_cylinders}")
+    name = args.bench or str(default_bench_path().relative_to(default_bench_path().parents[2]))
+    kind = "simulated" if bf.bench.simulated else "lab"
+    print(f"biafc check: {name} ({bf.bench.name!r}, {kind} bench)")
+    try:
+        inst = connect_bench(bf)
+    except (ConfigError, InstrumentError, OSError) as exc:
+        print(f"biafc check: cannot connect: {str(exc).splitlines()[0]}", file=sys.stderr)
+        return 1
+    try:
+        findings = preflight.check_settings(bf, inst)
+        if test is not None:
+            try:
+                findings += preflight.check_burst(bf, inst, test)
+            except (InstrumentError, ValueError) as exc:
+                findings.append(
+                    preflight.Finding(
+                        "burst",
+                        "one burst",
+                        "",
+                        str(exc).splitlines()[0],
+                        "MISMATCH",
+                        "the burst test did not complete",
+                    )
+                )
+    finally:
+        inst.close()
+    print_findings(findings, sys.stdout)
+    n_bad = sum(f.status == "MISMATCH" for f in findings)
+    if n_bad:
+        print(f"biafc check: {n_bad} mismatch(es): fix them before a scan", file=sys.stderr)
+        return 1
+    print(
+        "biafc check: every instrument matches the bench file"
+        + ("; the burst went through" if test is not None else "")
+    )
+    return 0

@@ -1,0 +1,132 @@
+"""``biafc check``: the preflight on the simulated bench, a deliberate mismatch named, the
+burst of ``--move``, and the carrier estimate it relies on."""
+
+from __future__ import annotations
+
+import re
+from typing import Any
+
+import numpy as np
+import pytest
+
+import daq.connect
+from daq.cli.biafc import main
+from daq.preflight import measured_carrier_Hz
+from instruments.burst import Burst
+
+
+def _connected(monkeypatch: pytest.MonkeyPatch, change: Any = None) -> list[Any]:
+    """Keep what ``connect_bench`` returned; ``change(bench)`` then alters the instruments."""
+    made: list[Any] = []
+    real = daq.connect.connect_bench
+
+    def keep(*a: Any, **k: Any) -> Any:
+        bench = real(*a, **k)
+        if change is not None:
+            change(bench)
+        made.append(bench)
+        return bench
+
+    monkeypatch.setattr(daq.connect, "connect_bench", keep)
+    return made
+
+
+def test_check_on_the_shipped_simulated_bench_passes(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    made = _connected(monkeypatch)
+    assert main(["check"]) == 0
+    out = capsys.readouterr().out
+    assert "sim_bench.yaml" in out and "every instrument matches the bench file" in out
+    for row in (
+        "33522B",
+        "4.00-1.19-2.00-58-00",
+        "VD-09 50mm/s/V",
+        "microstep",
+        "travel",
+        "31 cylinders",
+        "terminal configuration",
+        "rate per channel",
+    ):
+        assert row in out, row
+    assert "MISMATCH" not in out
+    world = made[0].world
+    assert world.clock.now() == pytest.approx(world.clock.now())  # nothing ran on the rig
+    assert not world._inst.stage.busy() and not world._inst.stage.homed
+
+
+def test_check_names_a_deliberate_mismatch(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Someone turned the vibrometer's range knob and pressed generator output 2 (on the
+    emulated instruments themselves, not through the drivers)."""
+
+    def tamper(bench: Any) -> None:
+        bench.world._inst.vibrometer.range_name = "VD-09 10mm/s/V"
+        bench.world._inst.generator.channels[2].output_on = True
+
+    _connected(monkeypatch, tamper)
+    assert main(["check"]) == 1
+    cap = capsys.readouterr()
+    lines = [ln for ln in cap.out.splitlines() if re.match(r"MISMATCH \S", ln)]  # the summary
+    assert len(lines) == 2, cap.out
+    assert lines[0].startswith(
+        "MISMATCH generator output 2 (rtl): ON (bench file: off): an output is on"
+    )
+    assert lines[1].startswith(
+        "MISMATCH vibrometer velocity range: VD-09 10mm/s/V (bench file: VD-09 50mm/s/V)"
+    )
+    assert "2 mismatch(es)" in cap.err
+
+
+def test_check_move_fires_one_burst_and_leaves_the_bench_safe(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    made = _connected(monkeypatch)
+    main(["check", "--move", "--cylinder", "2"])
+    out = capsys.readouterr().out
+    assert re.search(r"^ok\s+burst\s+signal level at cylinder 2", out, re.M)
+    assert re.search(r"^ok\s+burst\s+output 1 load\s+high Z \(INF\)\s+high Z \(INF\)", out, re.M)
+    assert re.search(r"^ok\s+burst\s+velocity peak\s+[\d.]+ mm/s", out, re.M)
+    m = re.search(r"carrier on the drive reference\s+8920 Hz\s+([\d.]+) Hz", out)
+    assert m is not None, out
+    assert abs(float(m.group(1)) - 8920.0) / 8920.0 < 2e-3
+    world = made[0].world
+    emu = world._inst
+    assert emu.stage.homed and world.n_acquisitions == 1
+    assert not any(ch.output_on for ch in emu.generator.channels.values())
+    pos = float(emu.stage.position_m())
+    assert pos == pytest.approx(float(world.cylinder_positions_m[1]), abs=1e-5)
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["check", "no_such_bench.yaml"], "no_such_bench.yaml"),
+        (["check", "--move", "--amplitude", "20 V"], "above the generator limit"),
+        (["check", "--move", "--amplitude", "2"], "--amplitude"),
+        (["check", "--move", "--cylinder", "32"], "choose 1..31"),
+    ],
+)
+def test_refused_requests_are_one_line_and_exit_2(
+    args: list[str],
+    message: str,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    made = _connected(monkeypatch)
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and message in err, err
+    assert not made  # refused before anything was connected
+
+
+@pytest.mark.parametrize("rate", [200e3, 1e6])
+@pytest.mark.parametrize("f_c", [8.92e3, 6.63e3])
+def test_the_carrier_of_a_burst_played_at_another_rate_is_measured(rate: float, f_c: float) -> None:
+    played = f_c * (1 - 9e-4)  # a generator playing its points 0.09 % slow
+    t = np.arange(2200) / rate
+    x = 0.7 * Burst(played, cycles=5).at(t - 123.4 / rate) + 0.01
+    assert measured_carrier_Hz(x, rate, Burst(f_c, cycles=5)) == pytest.approx(played, rel=1e-6)
+    noisy = x + np.random.default_rng(1).normal(0.0, 1e-3, x.size)
+    assert measured_carrier_Hz(noisy, rate, Burst(f_c, cycles=5)) == pytest.approx(played, rel=3e-4)
