@@ -199,15 +199,21 @@ def _vibrometer(bf: BenchFile, vib: Any) -> list[Finding]:
 
 def _stage(bf: BenchFile, stage: Any) -> list[Finding]:
     b = bf.bench
-    snap = stage.snapshot()
+    ident = stage.identity()  # read from the device at connect (deviceid, resolution, limits)
+    step = float(ident["microstep_m"])
+    lo, hi = (float(v) for v in ident["travel_m"])
+    named = b.stage.model or "-"
     out = [
-        Finding("stage", "model", "", str(snap.get("model", "?")), "info"),
-        Finding("stage", "microstep", "", f"{float(snap['microstep_m']) * 1e6:.6g} um", "info"),
+        Finding("stage", "model", named, f"device id {ident['device_id']}", "ok"),
+        Finding(
+            "stage",
+            "microstep",
+            f"{b.stage.microstep * 1e6:.6g} um" if b.stage.microstep else f"{named}'s",
+            f"{step * 1e6:.6g} um at resolution {ident['resolution']}",
+            "ok",
+        ),
+        Finding("stage", "travel", "", f"{_mm(lo)} .. {_mm(hi)}", "info"),
     ]
-    step = float(snap["microstep_m"])
-    lo = int(stage.command("get limit.min").data) * step
-    hi = int(stage.command("get limit.max").data) * step
-    out.append(Finding("stage", "travel", "", f"{_mm(lo)} .. {_mm(hi)}", "info"))
     soft_lo, soft_hi = b.stage.soft_limits
     inside = lo <= soft_lo and soft_hi <= hi
     out.append(

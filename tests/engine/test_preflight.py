@@ -62,7 +62,7 @@ def test_check_names_a_deliberate_mismatch(
     emulated instruments themselves, not through the drivers)."""
 
     def tamper(bench: Any) -> None:
-        bench.world._inst.vibrometer.range_name = "VD-09 10mm/s/V"
+        bench.world._inst.vibrometer.range_value = "10mm/s/V"
         bench.world._inst.generator.channels[2].output_on = True
 
     _connected(monkeypatch, tamper)
