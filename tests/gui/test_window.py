@@ -232,7 +232,7 @@ def test_a_resume_of_a_file_another_process_writes_is_refused(
 
     part = tmp_path / "part.h5"
     bf = load_bench()
-    inst = assemble(bf, faults={"stage_stall": True, "after_acquisitions": 4})
+    inst = connect_bench(bf, faults={"stage_stall": True, "after_acquisitions": 4})
     assert RunEngine(load_protocol(SMOKE), bf, inst, part).run().status == "failed"
     before = part.read_bytes()
     other = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
