@@ -25,7 +25,6 @@ import argparse
 import signal
 import sys
 import threading
-import time
 from collections.abc import Sequence
 from pathlib import Path
 from types import FrameType
@@ -78,10 +77,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _fmt_s(s: float) -> str:
-    s = max(0.0, s)
-    h, rem = divmod(round(s), 3600)
-    m, sec = divmod(rem, 60)
-    return f"{h}:{m:02d}:{sec:02d}" if h else f"{m:02d}:{sec:02d}"
+    from daq.progress import format_duration
+
+    return format_duration(s)
 
 
 def _fmt_amplitude(value: float, units: str) -> str:
@@ -93,53 +91,48 @@ def _fmt_amplitude(value: float, units: str) -> str:
 
 
 class Progress:
-    """Prints engine events: a one-line bar on a TTY, plain lines otherwise."""
+    """Shows engine events through :class:`daq.progress.ProgressDisplay`: a live bar with rate
+    and ETA on a terminal, plain lines otherwise; warnings as lines of their own."""
 
     def __init__(self, stream: TextIO, quiet: bool = False) -> None:
         self.stream = stream
-        self.tty = stream.isatty()
         self.quiet = quiet
-        self._last_plain = 0.0
+        self.display: Any = None
 
     def __call__(self, event: Any) -> None:
         from daq.engine import EventKind
+        from daq.progress import ProgressDisplay
 
         if self.quiet:
             return
         k, d = event.kind, event.data
-        if k == EventKind.PROGRESS:
-            amp = _fmt_amplitude(float(d["amplitude"]), str(d["amplitude_units"]))
-            where = f"{d['direction']} {amp} cyl {d['cylinder']:2d}"
-            if self.tty:
-                width = 30
-                fill = int(width * d["done"] / max(d["total"], 1))
-                bar = "#" * fill + "-" * (width - fill)
-                self.stream.write(
-                    f"\r[{bar}] {d['done']}/{d['total']} {where} ETA {_fmt_s(d['eta_s'])}  "
-                )
-                self.stream.flush()
-            else:
-                now = time.monotonic()
-                if d["done"] == d["total"] or now - self._last_plain >= 1.0:
-                    self._last_plain = now
-                    print(
-                        f"point {d['done']}/{d['total']}: {where}, ETA {_fmt_s(d['eta_s'])}",
-                        file=self.stream,
-                        flush=True,
-                    )
-        elif k == EventKind.WARNING:
-            if self.tty:
-                self.stream.write("\n")
-            print(f"warning: {event.message}", file=self.stream, flush=True)
-        elif k == EventKind.RUN_STARTED:
+        if k == EventKind.RUN_STARTED:
             print(
                 f"run {d['path']}: {d['n_todo']} of {d['n_points']} points to measure "
-                f"(estimated {_fmt_s(d['estimated_s'])})",
+                f"(estimated {_fmt_s(d['estimated_s'])} from "
+                f"{d.get('estimate_basis') or 'the plan'})",
                 file=self.stream,
                 flush=True,
             )
-        elif k == EventKind.FINISHED and self.tty:
-            self.stream.write("\n")
+            self.display = ProgressDisplay(
+                int(d["n_points"]),
+                unit="point",
+                label="measuring",
+                stream=self.stream,
+                start_done=int(d.get("n_already", 0)),
+            )
+        elif k == EventKind.PROGRESS and self.display is not None:
+            amp = _fmt_amplitude(float(d["amplitude"]), str(d["amplitude_units"]))
+            where = f"{d['direction']} {amp} cyl {d['cylinder']:2d}"
+            self.display.update(int(d["done"]), detail=where, eta_s=float(d["eta_s"]))
+        elif k == EventKind.WARNING:
+            text = f"warning: {event.message}"
+            if self.display is not None:
+                self.display.note(text)
+            else:
+                print(text, file=self.stream, flush=True)
+        elif k == EventKind.FINISHED and self.display is not None:
+            self.display.close()
 
 
 def _load(args: argparse.Namespace) -> tuple[Any, Any, Any]:
@@ -201,9 +194,10 @@ def run(args: argparse.Namespace) -> int:
     except StoreError as exc:
         raise CliError(str(exc)) from None
     if args.dry_run:
+        basis = plan.costs.basis if plan.costs is not None else "the plan"
         print(
             f"protocol {pf.protocol.name!r} on {bf.bench.name!r}: {plan.n_points} points, "
-            f"estimated {_fmt_s(plan.estimated_s)} ({plan.estimated_s:.1f} s); "
+            f"estimated {_fmt_s(plan.estimated_s)} ({plan.estimated_s:.1f} s, from {basis}); "
             f"output {out}"
         )
         return 0

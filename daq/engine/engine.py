@@ -588,18 +588,22 @@ class RunEngine:
         n_done = total - len(todo)
         self._n_already = n_done
         n_failed = 0
+        eta = self.plan.eta(tuple(todo))
         self._emit(
             EventKind.RUN_STARTED,
             f"{len(todo)} of {total} points to measure",
             path=str(self.out_path),
             n_points=total,
             n_todo=len(todo),
-            estimated_s=self.plan.estimated_s * len(todo) / max(total, 1),
+            n_already=n_done,
+            estimated_s=eta.total_s(),
+            estimate_basis=eta.costs.basis,
         )
         armed: tuple[str, int] | None = None
         t_start = time.monotonic()
         for k, point in enumerate(todo):
             self._check_boundary()
+            t_point = time.monotonic()
             if armed != (point.direction, point.amplitude_index):
                 self._arm_generator(point)
                 armed = (point.direction, point.amplitude_index)
@@ -620,15 +624,16 @@ class RunEngine:
                             f"cylinder {point.cylinder} failed after {proto.retries} retries"
                         ),
                     )
-            elapsed = time.monotonic() - t_start
+            now = time.monotonic()
+            eta.measured(now - t_point)
             left = len(todo) - k - 1
             self._emit(
                 EventKind.PROGRESS,
                 "",
                 done=total - left,
                 total=total,
-                elapsed_s=elapsed,
-                eta_s=elapsed / (k + 1) * left,
+                elapsed_s=now - t_start,
+                eta_s=eta.remaining_s(),
                 direction=point.direction,
                 amplitude=point.amplitude,
                 amplitude_units=self.plan.amplitude_units,

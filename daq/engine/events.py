@@ -61,13 +61,15 @@ class RunEvent:
     ``data`` by kind:
 
     * ``state_changed``: ``state`` (RunState value), ``previous``
-    * ``run_started``: ``path``, ``n_points``, ``n_todo``, ``estimated_s``
+    * ``run_started``: ``path``, ``n_points``, ``n_todo``, ``n_already``, ``estimated_s`` (from
+      the bench that runs it, :mod:`daq.engine.eta`), ``estimate_basis`` (what it rests on)
     * ``point_started`` / ``point_done`` / ``point_failed``: ``direction``, ``amplitude_index``,
       ``cylinder_index``, ``amplitude`` (SI), ``amplitude_units``, ``cylinder`` (1-based),
       ``attempt``; ``point_done`` adds ``velocity_m_per_s``, ``drive`` (V), ``time_s`` (each
       ``[S]``);
       ``point_failed`` adds ``reason``
-    * ``progress``: ``done``, ``total``, ``elapsed_s``, ``eta_s``, ``direction``, ``amplitude``,
+    * ``progress``: ``done``, ``total``, ``elapsed_s``, ``eta_s`` (the bench's estimate refined
+      by the measured point times), ``direction``, ``amplitude``,
       ``cylinder``
     * ``warning``: ``message``
     * ``finished``: ``status``, ``reason``, ``path``, ``n_done``, ``n_failed``, ``n_points``,

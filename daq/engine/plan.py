@@ -13,14 +13,12 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from daq.engine.eta import RECORD_OVERHEAD_S, EtaEstimator, PointCosts, arms_burst, prior_costs
 from instruments.units import format_quantity
 from protocols.bench import BenchFile
 from protocols.schema import ProtocolFile
 
-__all__ = ["Plan", "Point", "make_plan"]
-
-#: wall seconds per record beyond its duration (arming, trigger, transfer), for the ETA
-RECORD_OVERHEAD_S = 0.05
+__all__ = ["RECORD_OVERHEAD_S", "Plan", "Point", "make_plan"]
 
 
 @dataclass(frozen=True)
@@ -48,18 +46,18 @@ class Plan:
     cylinders: NDArray[np.int32]  # [C], 1-based
     positions_m: NDArray[np.float64]  # [C]
     estimated_s: float
+    #: the prior cost per point on this bench (:mod:`daq.engine.eta`), refined during a run
+    costs: PointCosts | None = None
+
+    def eta(self, points: tuple[Point, ...] | None = None) -> EtaEstimator:
+        """An ETA estimator for ``points`` (default: every point of the plan)."""
+        pts = self.points if points is None else points
+        costs = self.costs or PointCosts(self.estimated_s / max(self.n_points, 1), 0.0, "")
+        return EtaEstimator(costs, arms_burst(pts))
 
     @property
     def n_points(self) -> int:
         return len(self.points)
-
-
-def _move_time(points: tuple[Point, ...], speed: float, start_m: float) -> float:
-    t, pos = 0.0, start_m
-    for p in points:
-        t += abs(p.position_m - pos) / speed
-        pos = p.position_m
-    return t
 
 
 def make_plan(pf: ProtocolFile, bf: BenchFile) -> Plan:
@@ -122,8 +120,8 @@ def make_plan(pf: ProtocolFile, bf: BenchFile) -> Plan:
         (_, d), (ai, a), (ci, c) = sel["direction"], sel["amplitude"], sel["cylinder"]
         points.append(Point(str(d), ai, ci, float(a), float(vpp[ai]), int(c), float(positions[ci])))
     pts = tuple(points)
-    per_point = proto.settle + proto.averages * (acq.duration + acq.pre_trigger + RECORD_OVERHEAD_S)
-    est = len(pts) * per_point + _move_time(pts, bench.stage.speed, low)
+    costs = prior_costs(proto, bf, [p.position_m for p in pts])
+    est = EtaEstimator(costs, arms_burst(pts)).total_s()
     return Plan(
         points=pts,
         directions=tuple(proto.direction_list),
@@ -133,4 +131,5 @@ def make_plan(pf: ProtocolFile, bf: BenchFile) -> Plan:
         cylinders=cyl,
         positions_m=positions,
         estimated_s=float(est),
+        costs=costs,
     )

@@ -1,0 +1,193 @@
+"""How long a run takes: a prior from the bench that will run it, refined from measured points.
+
+A plan's points are of two kinds. The first point of each (direction, amplitude) *arms* a new
+burst: the generator takes the new waveform and, on the simulated bench, the model computes the
+chain's response to it (cached for the other cylinders); every other point only moves, settles
+and records. Each kind has a prior cost in seconds (:class:`PointCosts`):
+
+* a real bench (or a simulated one that waits in real time, ``speedup > 0``): the physical time
+  of a point (settle, ``averages`` records of pre-trigger plus duration plus
+  :data:`RECORD_OVERHEAD_S`, the mean stage move at the stage speed), divided by the speed-up,
+  and :data:`ARM_S` for a new burst;
+* the simulated bench (``speedup: 0``, nothing waits): the model's cost. Arming costs one DEM
+  run of ``dem_duration`` at the integrator's step, with its step-doubling error estimate (1.5
+  runs), at :data:`SECONDS_PER_MODE_STEP` per cylinder-mode and step, plus :data:`COMPILE_S`
+  once when the compiled model is not cached yet; other points cost :data:`SIM_POINT_S` plus
+  :data:`SIM_SAMPLE_S` per recorded sample (the emulated instruments and the noise).
+
+:class:`EtaEstimator` replaces a kind's prior by the median of its measured times as soon as
+one is measured (the run's very first point is left out once others of its kind exist: it
+carries one-time costs such as compiling or homing), so the ETA follows the bench at hand.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import statistics
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+__all__ = [
+    "ARM_S",
+    "COMPILE_S",
+    "RECORD_OVERHEAD_S",
+    "SECONDS_PER_MODE_STEP",
+    "SIM_POINT_S",
+    "SIM_SAMPLE_S",
+    "EtaEstimator",
+    "PointCosts",
+    "arms_burst",
+    "prior_costs",
+]
+
+#: wall seconds per record beyond its duration on a real bench (arming, trigger, transfer)
+RECORD_OVERHEAD_S = 0.05
+#: wall seconds to upload a new burst to the generator and switch its output (real bench)
+ARM_S = 0.5
+#: seconds of DEM per cylinder-mode and step (kernel throughput on a 2024 laptop core; the
+#: measured point times replace it during a run)
+SECONDS_PER_MODE_STEP = 25e-9
+#: first use of the model on a machine: numba compiles the kernel (then cached on disk)
+COMPILE_S = 15.0
+#: simulated bench, per point and per recorded sample (emulators, noise, digitiser)
+SIM_POINT_S = 2e-3
+SIM_SAMPLE_S = 7e-8
+
+
+@dataclass(frozen=True)
+class PointCosts:
+    """Prior seconds per point: ``arm_s`` extra for a point that arms a new burst, ``point_s``
+    for every point; ``basis`` says where they come from (printed with the dry run)."""
+
+    point_s: float
+    arm_s: float
+    basis: str
+    first_extra_s: float = 0.0  # one-time cost at the first point (compiling the model)
+
+
+def arms_burst(points: Sequence[Any]) -> list[bool]:
+    """For each point (``direction``, ``amplitude_index``) in order: does it arm a new burst?"""
+    out, armed = [], None
+    for p in points:
+        key = (p.direction, p.amplitude_index)
+        out.append(key != armed)
+        armed = key
+    return out
+
+
+def _model_compiled() -> bool:
+    """Whether numba's cache holds the DEM kernel already (its index files beside the kernel,
+    or under ``$NUMBA_CACHE_DIR``)."""
+    import os
+
+    try:
+        import importlib.util
+
+        spec = importlib.util.find_spec("sim_backend.dem.kernel")
+    except (ImportError, ValueError):
+        return True
+    if spec is None or spec.origin is None:
+        return True
+    here = Path(spec.origin).parent
+    places = [here / "__pycache__"]
+    if os.environ.get("NUMBA_CACHE_DIR"):
+        places.append(Path(os.environ["NUMBA_CACHE_DIR"]))
+    return any(any(p.rglob("kernel.*.nbi")) for p in places if p.is_dir())
+
+
+def _dem_run_s(bench_file: Any) -> float:
+    """Seconds of one DEM run of the simulated bench (its error estimate included)."""
+    from sim_backend.dem.simulation import DEFAULT_DT_S, DEFAULT_INTEGRATOR
+
+    bench = bench_file.bench
+    sim = bench.simulation
+    integrator = DEFAULT_INTEGRATOR if sim.dem_integrator == "default" else sim.dem_integrator
+    dt = sim.dem_dt if getattr(sim, "dem_dt", None) else DEFAULT_DT_S.get(integrator, 1e-6)
+    dt = min(float(dt), 1e-6)  # the step also follows the drive's sampling: never coarser
+    modes = _chain_modes(bench_file)
+    steps = float(sim.dem_duration) / dt
+    return 1.5 * steps * bench.n_cylinders * (modes + 1) * SECONDS_PER_MODE_STEP
+
+
+def _chain_modes(bench_file: Any) -> int:
+    """Local-resonance modes per cylinder of the simulated bench's chain."""
+    try:
+        from sim_backend.dem.spec import default_chain_spec, load_chain_spec
+
+        chain = bench_file.chain_path()
+        spec = load_chain_spec(chain) if chain is not None else default_chain_spec()
+        return int(spec.n_modes)
+    except Exception:
+        return 3
+
+
+def prior_costs(protocol: Any, bench_file: Any, positions_m: Sequence[float]) -> PointCosts:
+    """The prior per-point costs of ``protocol`` on the bench of ``bench_file`` (see the module
+    docstring); ``positions_m``: the stage positions in measurement order (for the mean move)."""
+    bench = bench_file.bench
+    acq = protocol.acquisition
+    records = protocol.averages * (acq.duration + acq.pre_trigger + RECORD_OVERHEAD_S)
+    moves = [abs(b - a) for a, b in itertools.pairwise(positions_m)]
+    move_s = (sum(moves) / len(moves) if moves else 0.0) / bench.stage.speed
+    physical = protocol.settle + records + move_s
+    sim = bench.simulation if bench.simulated else None
+    if sim is None:
+        return PointCosts(physical, ARM_S, "the bench's settle, record and stage times")
+    speedup = float(getattr(sim, "speedup", 0.0) or 0.0)
+    samples = protocol.averages * acq.n_samples()
+    point_s = SIM_POINT_S + SIM_SAMPLE_S * samples
+    if speedup > 0:
+        point_s += physical / speedup
+    compile_s = 0.0 if _model_compiled() else COMPILE_S
+    basis = "the model's cost on the simulated bench"
+    if compile_s:
+        basis += f" (the model is compiled first: about {COMPILE_S:.0f} s, once)"
+    return PointCosts(point_s, _dem_run_s(bench_file), basis, compile_s)
+
+
+class EtaEstimator:
+    """Time left for the points still to measure, from the priors refined by measured times.
+
+    ``arms``: for every point to measure, in order, whether it arms a new burst.
+    Call :meth:`measured` after each point with its wall time; :meth:`remaining_s` gives the
+    seconds for the points after it."""
+
+    def __init__(self, costs: PointCosts, arms: Sequence[bool]) -> None:
+        self.costs = costs
+        self.arms = list(arms)
+        self._times: dict[bool, list[float]] = {True: [], False: []}
+        self._first: tuple[bool, float] | None = None
+        self.n_measured = 0
+
+    def total_s(self) -> float:
+        """The prior of every point (what the dry run prints)."""
+        return self.costs.first_extra_s + sum(self._cost(a) for a in self.arms)
+
+    def _cost(self, arms: bool) -> float:
+        seen = self._times[arms]
+        if seen:
+            return float(statistics.median(seen))
+        return self.costs.point_s + (self.costs.arm_s if arms else 0.0)
+
+    def measured(self, seconds: float) -> None:
+        """The point at position ``n_measured`` took ``seconds`` of wall time."""
+        if self.n_measured >= len(self.arms) or not math.isfinite(seconds):
+            self.n_measured += 1
+            return
+        kind = self.arms[self.n_measured]
+        if self._first is None:
+            self._first = (kind, seconds)  # one-time costs: kept apart while others exist
+            self._times[kind].append(seconds)
+        else:
+            first_kind, first_s = self._first
+            if first_kind == kind and self._times[kind] == [first_s]:
+                self._times[kind] = []  # a second measurement of its kind: drop the first
+            self._times[kind].append(seconds)
+        self.n_measured += 1
+
+    def remaining_s(self) -> float:
+        """Seconds for the points not measured yet."""
+        return sum(self._cost(a) for a in self.arms[self.n_measured :])

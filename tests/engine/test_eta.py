@@ -1,0 +1,94 @@
+"""The ETA: estimated from the bench that will run it (the simulated bench: from the model's
+cost, not from the settle and record times it never waits), refined from measured point times."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+
+import daq.engine.eta as eta_mod
+from daq.cli import run_protocol as rp
+from daq.engine import EventKind, RunEngine, RunEvent, make_plan
+from daq.engine.eta import EtaEstimator, PointCosts, arms_burst
+from protocols.bench import load_bench
+from protocols.schema import load_protocol
+
+from .fakes import FakeWorld, Faults, fake_bench
+
+LAB_BENCH = Path(rp.__file__).resolve().parents[2] / "protocols" / "benches" / "lab_bench.yaml"
+
+
+def _dry_run_s(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[float, str]:
+    assert rp.main([*argv, "--dry-run"]) == 0
+    out = capsys.readouterr().out
+    m = re.search(r"estimated [0-9:]+ \(([0-9.]+) s, from ([^)]*\)?)[^;]*\);", out)
+    assert m, out
+    return float(m.group(1)), out
+
+
+def test_sim_bench_dry_run_estimates_from_the_model(capsys, monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """ltr_highamp on the simulated bench: 0.4 s of work, the dry run said 00:26 (the settle
+    and record times a real bench would wait)."""
+    monkeypatch.setattr(eta_mod, "_model_compiled", lambda: True)
+    sim_s, out = _dry_run_s(capsys, "ltr_highamp")
+    assert "from the model's cost on the simulated bench" in out
+    assert 0.05 < sim_s < 3.0
+    lab_s, out = _dry_run_s(capsys, "ltr_highamp", "--bench", str(LAB_BENCH))
+    assert "from the bench's settle, record and stage times" in out
+    # 31 points x (50 ms settle + 4 x (1 + 25 + 50) ms records), plus stage moves
+    assert 31 * (0.05 + 4 * 0.076) <= lab_s < 40.0
+
+
+def test_sim_bench_estimate_includes_the_first_compile(capsys, monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    monkeypatch.setattr(eta_mod, "_model_compiled", lambda: False)
+    s, out = _dry_run_s(capsys, "smoke")
+    assert s >= eta_mod.COMPILE_S and "compiled first" in out and "once" in out
+
+
+def test_sim_bench_cost_counts_a_model_run_per_burst(monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    monkeypatch.setattr(eta_mod, "_model_compiled", lambda: True)
+    bench = load_bench()
+    one = make_plan(load_protocol("ltr_highamp"), bench)  # 1 burst, 31 points
+    sweep = make_plan(load_protocol("biafc_sweep"), bench)  # 16 amplitudes x 31 cylinders
+    assert one.costs is not None and sweep.costs is not None
+    assert one.costs.arm_s > 10 * one.costs.point_s  # a model run against an emulated record
+    assert sum(arms_burst(sweep.points)) == 16
+    assert sweep.estimated_s > 15 * one.costs.arm_s
+
+
+def test_estimator_refines_each_kind_from_measured_times() -> None:
+    costs = PointCosts(point_s=1.0, arm_s=10.0, basis="test")
+    arms = [True, False, False, False, True, False, False, False]
+    est = EtaEstimator(costs, arms)
+    assert est.total_s() == pytest.approx(8 * 1.0 + 2 * 10.0)
+    est.measured(30.0)  # the first point: compile + model run
+    assert est.remaining_s() == pytest.approx(6 * 1.0 + 30.0)  # an arming point as measured
+    est.measured(0.1)
+    est.measured(0.3)
+    assert est.remaining_s() == pytest.approx(4 * 0.2 + 30.0)  # median of the measured
+    est.measured(0.2)
+    est.measured(2.0)  # the second arming point replaces the first (its one-time cost)
+    assert est.remaining_s() == pytest.approx(3 * 0.2)
+    for _ in range(3):
+        est.measured(0.2)
+    assert est.remaining_s() == 0.0
+
+
+def test_engine_eta_follows_the_measured_point_times(protocol, bench, out) -> None:  # type: ignore[no-untyped-def]
+    """The fake bench takes 2 x 40 ms per point (two averages): far more than the simulated
+    bench's prior; after a few points the ETA is the measured time of the points left."""
+    world = FakeWorld(faults=Faults(read_sleep_s=0.04))
+    eng = RunEngine(protocol, bench, fake_bench(world), out)
+    events: list[RunEvent] = []
+    eng.subscribe(events.append)
+    assert eng.run().status == "complete"
+    progress = [e.data for e in events if e.kind == EventKind.PROGRESS]
+    assert len(progress) == 12
+    d = progress[5]  # 6 done, 6 left
+    per_point = d["elapsed_s"] / 6
+    assert 0.5 * 6 * per_point < d["eta_s"] < 2.0 * 6 * per_point
+    assert progress[-1]["eta_s"] == 0.0
+    started = next(e.data for e in events if e.kind == EventKind.RUN_STARTED)
+    assert started["estimate_basis"] and started["estimated_s"] > 0
