@@ -73,7 +73,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="change a setting of the simulated bench's chain (diameter=12mm, preload=4N; "
         "repeatable); recorded in the run file's bench text",
     )
-    parser.add_argument("--quiet", action="store_true", help="no progress output")
+    from daq.logsetup import add_verbosity_arguments
+
+    add_verbosity_arguments(parser)
 
 
 def _fmt_s(s: float) -> str:
@@ -287,8 +289,17 @@ def _execute(
     quiet: bool,
     accept_bench_change: bool = False,
 ) -> int:
-    from daq.engine.outcome import ExitCode, exit_code, final_line
+    import logging
 
+    from daq.engine.outcome import ExitCode, exit_code, final_line
+    from daq.logsetup import attach_run_log, detach
+
+    log = logging.getLogger("biafc.run_protocol")
+    log_file = attach_run_log(out)  # RUN.log beside the run file: everything from INFO up
+    log.info(
+        "%s %s on %r into %s", "resuming" if resume else "starting", pf.protocol.name,
+        bf.bench.name, out,
+    )  # fmt: skip
     gate = _GATE or _SignalGate().install()
     try:
         try:
@@ -317,8 +328,14 @@ def _execute(
             gate._watchdog.cancel()
         if gate is not _GATE:
             gate.restore()
+        if "result" not in locals():
+            detach(log_file)
     code = exit_code(result, sigint="SIGINT" in gate.interrupted)
     line = final_line(result)
+    log.log(
+        logging.INFO if code == ExitCode.COMPLETE else logging.ERROR, "%s (exit %d)", line, code
+    )
+    detach(log_file)
     print(line, file=sys.stdout if code == ExitCode.COMPLETE else sys.stderr, flush=True)
     return int(code)
 
@@ -361,6 +378,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         add_arguments(parser)
         args = parser.parse_args(argv)
+        from daq.logsetup import configure, verbosity
+
+        configure(verbosity(args))
         return run(args)
     except CliError as exc:
         print(f"run_protocol: error: {exc}", file=sys.stderr)

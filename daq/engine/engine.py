@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import functools
 import json
+import logging
 import threading
 import time
 from collections.abc import Callable
@@ -40,6 +41,10 @@ from protocols.runfile import PointState, RunFileWriter, ScanSpec
 from protocols.schema import ProtocolFile
 
 __all__ = ["DeadInstrumentError", "PointCheckError", "RequestRefused", "RunEngine", "RunResult"]
+
+_LOGGER = logging.getLogger("biafc.run")
+_LEVELS = {"debug": logging.DEBUG, "info": logging.INFO, "warning": logging.WARNING,
+           "error": logging.ERROR}  # fmt: skip
 
 #: a record is "clipped" when |V| reaches this fraction of the input range
 CLIP_FRACTION = 0.995
@@ -229,6 +234,9 @@ class RunEngine:
         self._bus.emit(RunEvent(kind, text, data))
 
     def _log(self, level: str, message: str) -> None:
+        """A row of the file's ``/log``, a ``biafc.run`` log record (terminal with ``-v``, the log
+        file beside the run file) and, for warnings and errors, a WARNING event."""
+        _LOGGER.log(_LEVELS.get(level, logging.INFO), message)
         if self._writer is not None and not self._writer.closed:
             try:
                 self._writer.log(level, message)

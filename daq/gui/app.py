@@ -24,6 +24,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--run", type=Path, default=None, help="run file to browse")
     parser.add_argument("--connect", action="store_true", help="connect the bench at start")
+    from daq.logsetup import add_verbosity_arguments
+
+    add_verbosity_arguments(parser)
 
 
 def check_paths(args: argparse.Namespace) -> str | None:
@@ -71,7 +74,9 @@ def run_window(args: argparse.Namespace) -> int:
     from PySide6.QtWidgets import QApplication
 
     from daq.gui.main_window import MainWindow
+    from daq.logsetup import configure, verbosity
 
+    configure(verbosity(args))
     app = QApplication.instance() or QApplication(sys.argv[:1])
     app.setApplicationName("biafc-lab")
     win = MainWindow(args.bench, args.protocol)

@@ -8,6 +8,7 @@ figures run through :class:`BackgroundCall`. The GUI thread only draws.
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -176,6 +177,10 @@ class MainWindow(QMainWindow):
 
     # -- helpers ---------------------------------------------------------------------------
     def log(self, message: str, level: str = "info") -> None:
+        """A line in the window's log, and a ``biafc.gui`` record (terminal with ``-v``, the log
+        file beside the run file while a run is on: :mod:`daq.logsetup`)."""
+        levels = {"warning": logging.WARNING, "error": logging.ERROR}
+        logging.getLogger("biafc.gui").log(levels.get(level, logging.INFO), message)
         self.log_view.add(message, level)
         if level != "info":
             self.statusBar().showMessage(message, 10000)
@@ -524,6 +529,10 @@ class MainWindow(QMainWindow):
         self.run_panel.progress.setMaximum(engine.plan.n_points)
         self.run_panel.progress.setValue(0)
         self.run_panel.set_state("running")
+        from daq.logsetup import attach_run_log, detach
+
+        detach(getattr(self, "_run_log", None))
+        self._run_log: logging.Handler | None = attach_run_log(out)
         self.log(f"{'resuming' if resume else 'starting'} run -> {shown_path(out)}")
         engine.start()
         return True
@@ -606,6 +615,10 @@ class MainWindow(QMainWindow):
             self.statusBar().showMessage(line)
         self._redraw()
         self.refresh_snapshot()
+        from daq.logsetup import detach
+
+        detach(getattr(self, "_run_log", None))
+        self._run_log = None
         self.run_finished.emit(status)
 
     def _redraw_if_dirty(self) -> None:

@@ -63,6 +63,10 @@ def test_smoke_run_to_completion(
     assert run.status == "complete"
     assert bool(np.all(run.scans["ltr"].done == PointState.DONE))
     assert np.all(np.isfinite(run.scans["ltr"].velocity))
+    # the same logging as the command line: the run's log file beside the run file
+    log = (tmp_path / "run.log").read_text()
+    assert "biafc.gui: starting run" in log and "biafc.run: run started" in log
+    assert "complete: 6 points" in log
     # the window kept turning
     assert longest < MAX_STALL_MS, f"event loop stalled {longest:.0f} ms"
     print(f"longest event-loop stall during the smoke run: {longest:.1f} ms")
