@@ -55,32 +55,44 @@ def main(argv: list[str] | None = None) -> int:
     if args.list or not args.names:
         print("benchmarks: " + ", ".join(names))
         return 0 if args.list else 2
-    RESULTS.mkdir(exist_ok=True)
-    for name in args.names:
-        if name not in names:
-            print(f"unknown benchmark {name!r}; choose from {', '.join(names)}", file=sys.stderr)
-            return 2
-        module = importlib.import_module(f"benchmarks.{name}")
-        t0 = time.perf_counter()
-        result: dict[str, Any] = module.run()
-        result.setdefault("benchmark", name)
-        result["total_s"] = time.perf_counter() - t0
-        result["machine"] = {
-            "python": platform.python_version(),
-            "processor": platform.processor() or platform.machine(),
-            "cpus": os.cpu_count(),
-            "date": datetime.now(UTC).isoformat(timespec="seconds"),
-        }
-        print(f"== {name}")
-        if result.get("table"):
-            print(format_table(result["table"]))
-        for key, value in result.items():
-            if key not in ("table", "machine") and not isinstance(value, dict | list):
-                print(f"{key}: {value:.4g}" if isinstance(value, float) else f"{key}: {value}")
-        out = RESULTS / f"{name}.json"
-        out.write_text(json.dumps(result, indent=2, default=str) + "\n")
-        print(f"written {out.relative_to(Path.cwd()) if out.is_relative_to(Path.cwd()) else out}")
+    unknown = [n for n in args.names if n not in names]
+    if unknown:
+        print(f"unknown benchmark {unknown[0]!r}; choose from {', '.join(names)}", file=sys.stderr)
+        return 2
+    from daq.progress import ProgressDisplay
+
+    with ProgressDisplay(len(args.names), unit="benchmark", stream=sys.stderr) as bar:
+        for k, name in enumerate(args.names):
+            if bar.live:
+                bar.update(k, detail=f"{name} running")
+            _run_one(name)
+            bar.update(k + 1, detail=f"{name} done")
     return 0
+
+
+def _run_one(name: str) -> None:
+    """Run one benchmark, print its table and write its results."""
+    RESULTS.mkdir(exist_ok=True)
+    module = importlib.import_module(f"benchmarks.{name}")
+    t0 = time.perf_counter()
+    result: dict[str, Any] = module.run()
+    result.setdefault("benchmark", name)
+    result["total_s"] = time.perf_counter() - t0
+    result["machine"] = {
+        "python": platform.python_version(),
+        "processor": platform.processor() or platform.machine(),
+        "cpus": os.cpu_count(),
+        "date": datetime.now(UTC).isoformat(timespec="seconds"),
+    }
+    print(f"== {name}")
+    if result.get("table"):
+        print(format_table(result["table"]))
+    for key, value in result.items():
+        if key not in ("table", "machine") and not isinstance(value, dict | list):
+            print(f"{key}: {value:.4g}" if isinstance(value, float) else f"{key}: {value}")
+    out = RESULTS / f"{name}.json"
+    out.write_text(json.dumps(result, indent=2, default=str) + "\n")
+    print(f"written {out.relative_to(Path.cwd()) if out.is_relative_to(Path.cwd()) else out}")
 
 
 if __name__ == "__main__":

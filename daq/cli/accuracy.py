@@ -154,7 +154,10 @@ def plot_work_precision(reports: list[Any], path: Path) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from sim_backend.dem.accuracy import run_accuracy
+    import sys
+
+    from daq.progress import ProgressDisplay
+    from sim_backend.dem.accuracy import accuracy_runs, run_accuracy
 
     scenes = _scenes(args)
     if args.plot is not None:
@@ -164,11 +167,19 @@ def run(args: argparse.Namespace) -> int:
         if not parent.is_dir():
             raise CliError(f"--plot: folder {parent} does not exist")
     reports = []
-    for scene in scenes:
-        report = run_accuracy(scene, quick=args.quick, use_cache=not args.no_cache)
-        reports.append(report)
-        if not args.json:
-            print(format_report(report), flush=True)
+    total = len(scenes) * accuracy_runs(quick=args.quick)
+    with ProgressDisplay(total, unit="run", label="biafc accuracy", stream=sys.stderr) as bar:
+
+        def step(what: str) -> None:
+            bar.update(bar.done + 1, detail=what)
+
+        for scene in scenes:
+            report = run_accuracy(
+                scene, quick=args.quick, use_cache=not args.no_cache, on_step=step
+            )
+            reports.append(report)
+            if not args.json:
+                print(format_report(report), flush=True)  # stdout (rich keeps the bar apart)
     if args.plot is not None:
         plot_work_precision(reports, args.plot)
         if not args.json:

@@ -40,6 +40,8 @@ __all__ = [
     "EtaEstimator",
     "PointCosts",
     "arms_burst",
+    "dem_run_estimate_s",
+    "model_compiled",
     "prior_costs",
 ]
 
@@ -78,6 +80,20 @@ def arms_burst(points: Sequence[Any]) -> list[bool]:
     return out
 
 
+def dem_run_estimate_s(
+    n_cylinders: int, n_modes: int, duration_s: float, dt_s: float, error_estimate: bool = True
+) -> float:
+    """Seconds of one DEM run: steps times cylinder-modes at :data:`SECONDS_PER_MODE_STEP`
+    (the step-doubling error estimate adds a run at twice the step: half as many steps)."""
+    runs = 1.5 if error_estimate else 1.0
+    return runs * duration_s / dt_s * n_cylinders * (n_modes + 1) * SECONDS_PER_MODE_STEP
+
+
+def model_compiled() -> bool:
+    """Whether the DEM kernel is compiled and cached already (see :func:`_model_compiled`)."""
+    return _model_compiled()
+
+
 def _model_compiled() -> bool:
     """Whether numba's cache holds the DEM kernel already (its index files beside the kernel,
     or under ``$NUMBA_CACHE_DIR``)."""
@@ -108,8 +124,7 @@ def _dem_run_s(bench_file: Any) -> float:
     dt = sim.dem_dt if getattr(sim, "dem_dt", None) else DEFAULT_DT_S.get(integrator, 1e-6)
     dt = min(float(dt), 1e-6)  # the step also follows the drive's sampling: never coarser
     modes = _chain_modes(bench_file)
-    steps = float(sim.dem_duration) / dt
-    return 1.5 * steps * bench.n_cylinders * (modes + 1) * SECONDS_PER_MODE_STEP
+    return dem_run_estimate_s(bench.n_cylinders, modes, float(sim.dem_duration), dt)
 
 
 def _chain_modes(bench_file: Any) -> int:

@@ -17,6 +17,7 @@ from __future__ import annotations
 import itertools
 import math
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from typing import Any, Literal
 
@@ -198,14 +199,25 @@ def observed_order(steps_s: list[float], errors: list[float], floor_rel: float) 
     return float(np.polyfit(x, y, 1)[0])
 
 
+def accuracy_runs(quick: bool = False, methods: list[str] | None = None) -> int:
+    """How many steps :func:`run_accuracy` takes on one scene: the reference, then one per
+    setting of every ladder (for a progress display)."""
+    ladders = QUICK_LADDERS if quick else FULL_LADDERS
+    names = list(ladders) if methods is None else methods
+    return 1 + sum(len(ladders[m]) for m in names if m in ladders)
+
+
 def run_accuracy(
     scene: AccuracyScene,
     *,
     quick: bool = False,
     methods: list[str] | None = None,
     use_cache: bool = True,
+    on_step: Callable[[str], None] | None = None,
 ) -> SceneReport:
-    """Measure every method of the ladders (``quick``: the short ones) on ``scene``."""
+    """Measure every method of the ladders (``quick``: the short ones) on ``scene``;
+    ``on_step(what)`` is called after the reference and after each setting (progress)."""
+    step = on_step or (lambda what: None)
     ladders = QUICK_LADDERS if quick else FULL_LADDERS
     names = list(ladders) if methods is None else methods
     unknown = [m for m in names if m not in ladders]
@@ -215,6 +227,7 @@ def run_accuracy(
         ref = converged_reference(scene, dt0_s=0.125e-6, min_dt_s=62.5e-9, use_cache=use_cache)
     else:
         ref = converged_reference(scene, use_cache=use_cache)
+    step(f"{scene.name}: reference")
     report = SceneReport(
         scene=scene.name,
         description=BUILTIN_SCENES.get(scene.name, "custom scene"),
@@ -231,6 +244,7 @@ def run_accuracy(
                 rows.append(measure_scipy(scene, ref, name, setting))
             else:
                 rows.append(measure_fixed(scene, ref, name, setting))
+            step(f"{scene.name}: {name} at {setting:.3g}")
         report.measurements.extend(rows)
         if name not in SCIPY_METHODS:
             report.nominal_orders[name] = INTEGRATORS[_splitting(name)[0]][0]

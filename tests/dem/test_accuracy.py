@@ -95,7 +95,12 @@ def test_cli_quick_json_and_plot(tmp_path: Path, capsys: pytest.CaptureFixture[s
     png = tmp_path / "wp.png"
     argv = ["accuracy", "--quick", "--json", "--scene", "linear", "--duration", "1 ms"]
     assert main([*argv, "--plot", str(png)]) == 0
-    out = json.loads(capsys.readouterr().out)
+    captured = capsys.readouterr()
+    out = json.loads(captured.out)  # the progress display keeps to stderr
+    from sim_backend.dem.accuracy import accuracy_runs
+
+    n = accuracy_runs(quick=True)
+    assert f"run {n}/{n}: linear: " in captured.err and "ETA 00:00" in captured.err
     (scene,) = out["scenes"]
     methods = {m["method"] for m in scene["measurements"]}
     assert methods == {

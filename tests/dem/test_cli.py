@@ -39,7 +39,8 @@ def test_simulate_writes_a_run_file(tmp_path: Path, capsys: pytest.CaptureFixtur
     argv = ["simulate", "--direction", "rtl", "--amplitude", "2 um", "--duration", "5 ms",
             "--rate", "250 kS/s", "--out", str(out)]  # fmt: skip
     assert main(argv) == 0
-    text = capsys.readouterr().out
+    captured = capsys.readouterr()
+    text = captured.out
     assert "transmitted energy ratio" in text and "far-end output peak f_out" in text
     assert text.count("peak") == 1  # one far-end peak, one definition
     run = read_run(out)
