@@ -6,9 +6,9 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
+import daq.bench_assembly
 import pytest
 
-import daq.bench_assembly
 from daq.cli import run_protocol as rp
 from daq.logsetup import LOGGER, attach_run_log, configure, detach, log_path_for
 

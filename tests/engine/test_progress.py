@@ -6,9 +6,9 @@ from __future__ import annotations
 import io
 from pathlib import Path
 
+import daq.bench_assembly
 import pytest
 
-import daq.bench_assembly
 from daq.cli import run_protocol as rp
 from daq.progress import ProgressDisplay, format_duration, format_rate
 
