@@ -6,9 +6,9 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
-import daq.bench_assembly
 import pytest
 
+import daq.connect
 from daq.cli import run_protocol as rp
 from daq.logsetup import LOGGER, attach_run_log, configure, detach, log_path_for
 
@@ -18,7 +18,7 @@ from .helpers import PROTOCOL
 
 @pytest.fixture
 def proto(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
-    monkeypatch.setattr(daq.bench_assembly, "assemble", lambda bf, **k: fake_bench(FakeWorld()))
+    monkeypatch.setattr(daq.connect, "connect_bench", lambda bf, **k: fake_bench(FakeWorld()))
     f = tmp_path / "p.yaml"
     f.write_text(PROTOCOL)
     yield f

@@ -6,9 +6,9 @@ from __future__ import annotations
 import io
 from pathlib import Path
 
-import daq.bench_assembly
 import pytest
 
+import daq.connect
 from daq.cli import run_protocol as rp
 from daq.progress import ProgressDisplay, format_duration, format_rate
 
@@ -64,7 +64,7 @@ def test_formats() -> None:
 
 @pytest.mark.parametrize("tty", [True, False])
 def test_run_protocol_progress(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, tty: bool) -> None:
-    monkeypatch.setattr(daq.bench_assembly, "assemble", lambda bf, **k: fake_bench(FakeWorld()))
+    monkeypatch.setattr(daq.connect, "connect_bench", lambda bf, **k: fake_bench(FakeWorld()))
     proto = tmp_path / "p.yaml"
     proto.write_text(PROTOCOL)
     stream = Tty() if tty else io.StringIO()
