@@ -3,6 +3,8 @@
 What is drawn (names without extension; each written as PNG and PDF):
 
 - ``quasi_bands``: the chain's quasi-band diagram with the scanned inputs (always);
+- ``regime``: far/near rms ratio against amplitude for both directions with the linear floor,
+  and the far-end output peak against amplitude (any sweep of >= 2 amplitudes).
 - ``amplitude_sweep``: far-cylinder spectrum against amplitude, both directions, and the
   detuning (for the directions whose far cylinder was measured at two amplitudes or more; a
   single amplitude is no sweep, and the summary says why the figure was left out);
@@ -76,6 +78,7 @@ def _save(report: FigureReport, fig: Figure, out: Path, name: str) -> None:
 def write_figures(run: RunData, out_dir: str | Path) -> FigureReport:
     """Write every figure ``run`` supports and ``summary.json`` into ``out_dir``."""
     from analysis.plots.quasi_bands import plot_quasi_bands
+    from analysis.plots.regime_plot import plot_regime
     from analysis.plots.spatial_plot import plot_spatial_frequency
     from analysis.plots.spatiotemporal_plot import plot_spatiotemporal
     from analysis.plots.spectra_plot import plot_spectra
@@ -167,10 +170,14 @@ def write_figures(run: RunData, out_dir: str | Path) -> FigureReport:
 
     if sweeps:
         _save(report, plot_amplitude_sweep(sweeps), out, "amplitude_sweep")
+        _save(report, plot_regime(sweeps), out, "regime")
         for direction, why in sweep_why.items():
             report.skipped[f"amplitude_sweep ({direction})"] = why
+            report.skipped[f"regime ({direction})"] = why
     else:
-        report.skipped["amplitude_sweep"] = "; ".join(sweep_why.values()) or "no scan measured"
+        why_all = "; ".join(sweep_why.values()) or "no scan measured"
+        report.skipped["amplitude_sweep"] = why_all
+        report.skipped["regime"] = why_all
 
     report.summary = summarize(run)
     report.summary["figures_left_out"] = dict(report.skipped)

@@ -19,6 +19,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "accuracy": ("accuracy", "error against run time of the integrators"),
     "stability": ("stability", "stiff and extreme cases, each with a verdict"),
     "figures": ("figures", "the paper's figures from a run file"),
+    "regime": ("regime", "transmission and output peak against amplitude, from the model"),
     "compare": ("compare", "the model on what a run did, beside the measurement"),
     "calibrate": ("calibrate", "fit the chain model to a scan's linear points"),
     "repair": ("repair", "make a run file left by a killed writer readable by any reader"),

@@ -168,3 +168,28 @@ def test_run_protocol_set_reaches_the_simulated_bench_and_is_recorded(
     assert run_protocol(bad) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "diameter" in err
+
+
+def test_biafc_regime_and_figures_draw_the_regime(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from analysis.report import write_figures
+
+    out = tmp_path / "regime"
+    argv = ["regime", "--out", str(out), "--count", "3", "--from", "0.01um", "--to", "2um",
+            "--duration", "12 ms", "--set", "n_modes=3"]  # fmt: skip
+    assert main(argv) == 0
+    text = capsys.readouterr().out
+    assert "linear floor" in text and (out / "regime.png").stat().st_size > 10_000
+    run = read_run(out / "regime.h5")
+    assert set(run.scans) == {"ltr", "rtl"} and run.scans["ltr"].velocity.shape[:2] == (3, 31)
+    # biafc figures draws the same figure for any amplitude sweep; one amplitude: left out
+    report = write_figures(run, tmp_path / "figs")
+    assert (tmp_path / "figs" / "regime.png").exists() and "regime" not in report.skipped
+    single = tmp_path / "single.h5"
+    one = ["simulate", "--direction", "ltr", "--amplitude", "1um", "--duration", "3 ms",
+           "--rate", "250 kS/s", "--no-error-estimate", "--out", str(single)]  # fmt: skip
+    assert main(one) == 0
+    report = write_figures(read_run(single), tmp_path / "figs1")
+    assert "regime" in report.skipped and not (tmp_path / "figs1" / "regime.png").exists()
+    assert main(["regime", "--out", str(out)]) == 2  # refuses to overwrite

@@ -1,0 +1,72 @@
+"""The regime in one look: far/near rms transmission against drive amplitude for both
+directions, with the linear floor, and the converted far-end peak frequency.
+
+Top: ``sqrt(E_far / E_entry)`` (the far/near rms ratio, dimensionless) per amplitude, log-log;
+the dashed line of each direction is its linear floor, the ratio at the smallest amplitude (a
+linear chain passes the same fraction at every amplitude, so what rises above the floor is
+what the nonlinearity lets through). Bottom: the far cylinder's output peak (kHz) per
+amplitude, with the input frequency (dashed) and the far cylinder's band edge that the
+conversion heads for (dotted).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from analysis.plots.quasi_bands import DIRECTION_COLOURS
+from analysis.plots.style import amplitude_scale, new_figure, style
+from analysis.sweep import AmplitudeSweep
+
+__all__ = ["plot_regime", "rms_ratio"]
+
+MARKERS = {"ltr": "o-", "rtl": "s-"}
+
+
+def rms_ratio(sweep: AmplitudeSweep) -> np.ndarray:
+    """Far/near rms ratio ``[A]`` of a sweep: ``sqrt(E_far / E_entry)`` (NaN where unmeasured)."""
+    return np.sqrt(np.asarray(sweep.transmission, dtype=np.float64))
+
+
+def plot_regime(sweeps: Mapping[str, AmplitudeSweep]) -> Figure:
+    """The regime figure of one or two directions' amplitude sweeps (see the module doc)."""
+    with style():
+        fig, axes = new_figure(2, 1, figsize=(6.4, 6.4), sharex=True)
+        ax_t, ax_f = axes[0, 0], axes[1, 0]
+        units = {sw.amplitude_units for sw in sweeps.values()}
+        all_amps = np.concatenate([sw.amplitudes for sw in sweeps.values()])
+        factor, unit = amplitude_scale(all_amps, units.pop() if len(units) == 1 else "")
+        for d, sw in sweeps.items():
+            colour = DIRECTION_COLOURS.get(d, "k")
+            amps = sw.amplitudes / factor
+            r = rms_ratio(sw)
+            ok = np.isfinite(r) & (amps > 0)
+            if not ok.any():
+                continue
+            floor = float(r[ok][np.argmin(amps[ok])])
+            top = float(np.nanmax(r[ok]))
+            ax_t.plot(amps[ok], r[ok], MARKERS.get(d, "o-"), color=colour,
+                      label=f"{d.upper()} (x{top / floor:.3g} over the floor)")  # fmt: skip
+            ax_t.axhline(floor, color=colour, ls="--", lw=1,
+                         label=f"{d.upper()} linear floor {floor:.2g}")  # fmt: skip
+            fo = np.isfinite(sw.output_Hz) & (amps > 0)
+            ax_f.plot(amps[fo], sw.output_Hz[fo] / 1e3, MARKERS.get(d, "o-"), color=colour,
+                      label=f"{d.upper()} far-end peak")  # fmt: skip
+            f_in = float(np.nanmedian(sw.input_Hz))
+            ax_f.axhline(f_in / 1e3, color=colour, ls="--", lw=1,
+                         label=f"{d.upper()} input {f_in / 1e3:.2f} kHz")  # fmt: skip
+            edge = f"{d.upper()} far-cylinder edge {sw.expected_Hz / 1e3:.2f} kHz"
+            ax_f.axhline(sw.expected_Hz / 1e3, color=colour, ls=":", lw=1.5, label=edge)
+        ax_t.set_xscale("log")
+        ax_t.set_yscale("log")
+        ax_t.set_ylabel("far/near rms ratio")
+        ax_t.set_title("Transmission against drive amplitude")
+        ax_t.legend(fontsize="small")
+        ax_t.grid(True, which="both", alpha=0.3)
+        ax_f.set_xlabel(f"drive amplitude ({unit})")
+        ax_f.set_ylabel("far-end output peak (kHz)")
+        ax_f.legend(fontsize="small")
+        ax_f.grid(True, alpha=0.3)
+    return fig
