@@ -26,6 +26,7 @@ from protocols.runfile import read_run
 EXPECTED_FIGURES = {
     "quasi_bands",
     "amplitude_sweep",
+    "regime",
     *(
         f"{k}_{d}"
         for k in ("spectra", "spatial_frequency", "stft", "spatiotemporal")
@@ -236,7 +237,7 @@ def test_one_short_point_gives_what_it_can(tmp_path: Path) -> None:
     w.close("aborted")
     report = write_figures(read_run(tmp_path / "short.h5"), tmp_path / "figs")
     assert {"quasi_bands", "spectra_ltr", "spatial_frequency_ltr"} <= set(report.figures)
-    assert set(report.skipped) == {"stft_ltr", "amplitude_sweep"}
+    assert set(report.skipped) == {"stft_ltr", "amplitude_sweep", "regime"}
     assert report.summary["rows"][0]["conversion"] == "not measured"
 
 
