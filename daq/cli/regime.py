@@ -63,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
     from analysis.plots.regime_plot import plot_regime, rms_ratio
     from analysis.plots.style import save_figure
     from analysis.sweep import amplitude_sweep
-    from daq.bench_assembly import model_chain_info
+    from daq.chain_info import model_chain_info
     from instruments.burst import NARROWBAND_CYCLES, Burst
     from protocols.runfile import RunFileWriter, ScanSpec, read_run
     from sim_backend import dem
