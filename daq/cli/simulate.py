@@ -173,12 +173,17 @@ def run(args: argparse.Namespace) -> int:
         scene = Scene(chain, (drive,), duration, rate, record=("velocity", "drive"))
         print(plan_scene(scene).explain())
         return 0
-    if args.lean:
-        if dt is not None or args.integrator != "default":
-            raise CliError("--lean picks the model itself; drop --dt and --integrator")
-        res, simulation = _run_lean(chain, drive, duration, rate)
-    else:
-        res, simulation = _run_full(args, chain, drive, duration, rate, dt)
+    if args.lean and (dt is not None or args.integrator != "default"):
+        raise CliError("--lean picks the model itself; drop --dt and --integrator")
+    progress = _stages(args, chain, duration, dt)
+    try:
+        if args.lean:
+            res, simulation = _run_lean(chain, drive, duration, rate)
+        else:
+            res, simulation = _run_full(args, chain, drive, duration, rate, dt)
+        progress.update(1, detail="model run done; writing the run file", eta_s=0.2)
+    finally:
+        progress.close()
     simulation.update(
         drive_kind=kind,
         far_end=chain.far_end,
@@ -249,6 +254,27 @@ def run(args: argparse.Namespace) -> int:
         f"{math.sqrt(float(sweep.transmission[0])):.4g}"
     )
     return 0
+
+
+def _stages(args: argparse.Namespace, chain: Any, duration: float, dt: float | None) -> Any:
+    """The progress display of a simulation (:mod:`daq.progress`, on stderr): the model run,
+    its ETA from the model's cost (:mod:`daq.engine.eta`, with the first compile)."""
+    import sys
+
+    from daq.engine.eta import COMPILE_S, dem_run_estimate_s, model_compiled
+    from daq.progress import ProgressDisplay
+    from sim_backend.dem.simulation import DEFAULT_DT_S, DEFAULT_INTEGRATOR
+
+    name = DEFAULT_INTEGRATOR if args.integrator == "default" else args.integrator
+    step = dt if dt is not None else DEFAULT_DT_S.get(name, 1e-6)
+    est = dem_run_estimate_s(chain.n, chain.n_modes, duration, step, not args.no_error_estimate)
+    compiled = model_compiled()
+    first = "" if compiled else f"; compiling the model first (once, about {COMPILE_S:.0f} s)"
+    display = ProgressDisplay(1, unit="model run", label="biafc simulate", stream=sys.stderr)
+    if display.live:  # piped: no line before the run (an error stays one line)
+        est += 0.0 if compiled else COMPILE_S
+        display.update(0, detail=f"{name}{first}", eta_s=est)
+    return display
 
 
 def _run_full(

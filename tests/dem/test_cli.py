@@ -41,6 +41,7 @@ def test_simulate_writes_a_run_file(tmp_path: Path, capsys: pytest.CaptureFixtur
     assert main(argv) == 0
     captured = capsys.readouterr()
     text = captured.out
+    assert "model run 1/1: model run done" in captured.err  # daq.progress, piped: plain lines
     assert "transmitted energy ratio" in text and "far-end output peak f_out" in text
     assert text.count("peak") == 1  # one far-end peak, one definition
     run = read_run(out)
