@@ -25,6 +25,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "repair": ("repair", "make a run file left by a killed writer readable by any reader"),
     "check": ("check", "preflight: every instrument against the bench file"),
     "gui": ("gui", "the bench window"),
+    "warmup": ("warmup", "compile the DEM kernel ahead of time (it happens once)"),
 }
 
 
@@ -49,6 +50,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.print_help()
         return 0 if argv else 2
     name = argv[0]
+    if name in ("simulate", "accuracy", "stability"):  # may compile the DEM kernel
+        from daq.cli import compile_notice
+
+        compile_notice.install()
     if name not in SUBCOMMANDS:
         parser.error(f"unknown command {name!r} (choose from {', '.join(SUBCOMMANDS)})")
     try:

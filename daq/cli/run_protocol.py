@@ -301,6 +301,12 @@ def _execute(
         bf.bench.name, out,
     )  # fmt: skip
     gate = _GATE or _SignalGate().install()
+    if bf.bench.simulation is not None and not quiet:  # say now that the first point compiles
+        from daq.cli import compile_notice
+        from sim_backend.dem.kernel_cache import announce_if_cold
+
+        compile_notice.install()
+        announce_if_cold()
     try:
         try:
             gate.engine, instruments = _connect(pf, bf, out, resume, seed, accept_bench_change)

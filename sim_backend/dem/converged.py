@@ -5,15 +5,14 @@ The reference is the 6th-order composition ``yoshida6`` run at ``dt0``, ``dt0/2`
 relative L2 change of the worst cylinder's velocity between two halvings falls below
 ``tolerance_rel`` (or the step reaches ``min_dt_s``: then ``converged`` is False and the change
 reached is reported). The finest run is the reference. It is stored as ``<digest>.npz`` in
-:func:`cache_dir` (``$BIAFC_CACHE_DIR``, else ``$XDG_CACHE_HOME/biafc-lab``, else
-``~/.cache/biafc-lab``; never inside the repository), keyed by the scene (chain YAML, drive,
-window, rate) and the reference method (integrator, dt0, tolerance, min step).
+:func:`~sim_backend.dem.user_cache.cache_dir` (never inside the repository), keyed by the
+scene (chain YAML, drive, window, rate) and the reference method (integrator, dt0, tolerance,
+min step).
 """
 
 from __future__ import annotations
 
 import json
-import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,18 +24,9 @@ from sim_backend.dem.accuracy_scenes import AccuracyScene
 from sim_backend.dem.beam import MODES_VERSION
 from sim_backend.dem.errors import rel_l2
 from sim_backend.dem.kernel import NUMERICS_VERSION
+from sim_backend.dem.user_cache import cache_dir
 
 __all__ = ["ConvergedReference", "cache_dir", "converged_reference"]
-
-
-def cache_dir() -> Path:
-    """The user cache folder of biafc-lab (created on demand by the writers)."""
-    env = os.environ.get("BIAFC_CACHE_DIR")
-    if env:
-        return Path(env).expanduser()
-    xdg = os.environ.get("XDG_CACHE_HOME")
-    base = Path(xdg).expanduser() if xdg else Path.home() / ".cache"
-    return base / "biafc-lab"
 
 
 @dataclass(frozen=True)

@@ -45,7 +45,10 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
+from sim_backend.dem.kernel_cache import install_cache_locator
 from sim_backend.dem.simd import Vec4, vfma, vload, vmax, vsplat, vsqrt, vstore
+
+install_cache_locator()  # compiled code goes to the user's cache folder, not next to the sources
 
 __all__ = ["NUMERICS_VERSION", "drift_coefficients", "drive_value", "run_batch"]
 

@@ -17,6 +17,7 @@ from sim_backend.dem.chain import Chain
 from sim_backend.dem.drive import Drive
 from sim_backend.dem.errors import step_doubling_error
 from sim_backend.dem.kernel import drift_coefficients, run_batch
+from sim_backend.dem.kernel_cache import compile_notice
 from sim_backend.dem.step_limit import StepTooLargeError, check_step
 from sim_backend.dem.threads import one_blas_thread
 
@@ -326,7 +327,7 @@ def simulate(
         stop_every = max(1, round(stop_check_s * sample_rate_Hz))
     energy = np.zeros((R, 6))
     lane_traj, chunk_orient = _lanes(orient)
-    with _KERNEL_LOCK:
+    with _KERNEL_LOCK, compile_notice():
         run_batch(
             phi0, omega, drift2, chi2, np.sum(phi0**2, axis=2), lane_traj, chunk_orient,
             dkind, src, prm, tables, n_table,

@@ -319,7 +319,7 @@ def _range_key(chain: Chain, integrator: str, h: float) -> str:
 
 
 def _disk_path() -> Path:
-    from sim_backend.dem.converged import cache_dir
+    from sim_backend.dem.user_cache import cache_dir
 
     return cache_dir() / "step-stability.json"
 

@@ -1,0 +1,43 @@
+"""The command line's notice while the DEM kernel compiles on first use (issue 19).
+
+``install(stream)`` makes the model report a first-use compilation on ``stream``: one line when
+it starts (what happens, that it happens once, where it is kept), the elapsed time on a terminal
+(rewritten every second), and one line when it is done.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import TextIO
+
+__all__ = ["CompileNotice", "install"]
+
+
+class CompileNotice:
+    """A :data:`sim_backend.dem.kernel_cache.CompileReporter` that writes to a stream."""
+
+    def __init__(self, stream: TextIO) -> None:
+        self.stream = stream
+        self.tty = stream.isatty()
+
+    def __call__(self, phase: str, elapsed_s: float, folder: Path, cold: bool) -> None:
+        what = "compiling" if cold else "loading or recompiling"
+        if phase == "start":
+            self.stream.write(
+                f"{what} the DEM kernel for this machine: once per installation, usually "
+                f"10-40 s; kept in {folder} (`biafc warmup` does it ahead of time)\n"
+            )
+        elif phase == "tick" and self.tty:
+            self.stream.write(f"\r  {what} the DEM kernel ... {elapsed_s:4.0f} s")
+        elif phase == "done":
+            lead = "\r" if self.tty else ""
+            self.stream.write(f"{lead}  DEM kernel ready after {elapsed_s:.1f} s          \n")
+        self.stream.flush()
+
+
+def install(stream: TextIO | None = None) -> None:
+    """Report first-use compilations of the DEM kernel on ``stream`` (default: stderr)."""
+    from sim_backend.dem.kernel_cache import set_compile_reporter
+
+    set_compile_reporter(CompileNotice(stream if stream is not None else sys.stderr))

@@ -1,0 +1,174 @@
+"""Where the compiled DEM kernel lives, and a notice while it compiles.
+
+numba compiles the kernel (:mod:`sim_backend.dem.kernel`) on first use, 10-30 s, and keeps the
+machine code on disk. By default numba writes it next to the sources (inside the checkout of an
+editable install, in a possibly read-only site-packages otherwise); here it goes to the user's
+cache folder, ``<cache_dir>/numba`` (:func:`sim_backend.dem.user_cache.cache_dir`: platformdirs'
+user cache folder of biafc-lab, or ``$BIAFC_CACHE_DIR``), for the project's own files only.
+``$NUMBA_CACHE_DIR`` or ``$NUMBA_CACHE_LOCATOR_CLASSES``, when set, win; a cache folder that
+cannot be written falls back to numba's own choice.
+
+While the first call of a process compiles (or loads) the kernel, :func:`compile_notice` tells
+the reporter set by :func:`set_compile_reporter` (the command-line tools print one line, and the
+elapsed time on a terminal): ``("start" | "tick" | "done", elapsed_s, cache_folder, cold)``.
+``biafc warmup`` compiles it ahead of time.
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+__all__ = [
+    "CompileReporter",
+    "announce_if_cold",
+    "compile_notice",
+    "install_cache_locator",
+    "kernel_cache_dir",
+    "kernel_cached_on_disk",
+    "kernel_loaded",
+    "set_compile_reporter",
+]
+
+#: (phase "start" | "tick" | "done", elapsed s, cache folder, cold: nothing on disk yet)
+CompileReporter = Callable[[str, float, Path, bool], None]
+
+_PACKAGES = ("sim_backend", "benchmarks", "analysis", "daq", "instruments", "protocols", "tests")
+_ROOT = Path(__file__).resolve().parents[2]
+_REPORTER: CompileReporter | None = None
+_INSTALLED = False
+_ANNOUNCED = False
+
+
+def kernel_cache_dir() -> Path:
+    """The folder of the compiled kernel: ``<cache_dir>/numba``."""
+    from sim_backend.dem.user_cache import cache_dir
+
+    return cache_dir() / "numba"
+
+
+def _ours(py_file: str) -> bool:
+    try:
+        rel = Path(py_file).resolve().relative_to(_ROOT)
+    except (ValueError, OSError):
+        return False
+    return bool(rel.parts) and rel.parts[0] in _PACKAGES
+
+
+def install_cache_locator() -> None:
+    """Put the project's numba cache in :func:`kernel_cache_dir` (call before any
+    ``@njit(cache=True)`` of the project runs; idempotent)."""
+    global _INSTALLED
+    if _INSTALLED:
+        return
+    _INSTALLED = True
+    if os.environ.get("NUMBA_CACHE_DIR") or os.environ.get("NUMBA_CACHE_LOCATOR_CLASSES"):
+        return
+    from numba.core import caching
+
+    base: Any = getattr(caching, "UserProvidedCacheLocator", None) or getattr(
+        caching, "_UserProvidedCacheLocator", None
+    )
+    impl: Any = getattr(caching, "CacheImpl", None) or getattr(caching, "_CacheImpl", None)
+    if base is None or impl is None:  # a numba without these internals: its default
+        return
+    mixin = base.__mro__[1]  # the source-file-backed locator: checks and creates the folder
+
+    class BiafcCacheLocator(base):  # type: ignore[misc, valid-type]
+        """The project's files: cache in the user's cache folder."""
+
+        def __init__(self, py_func: Any, py_file: str) -> None:
+            self._py_file = py_file
+            self._lineno = py_func.__code__.co_firstlineno
+            sub = self.get_suitable_cache_subpath(py_file)
+            self._cache_path = str(kernel_cache_dir() / sub)
+
+        @classmethod
+        def from_function(cls, py_func: Any, py_file: str) -> Any:
+            if not _ours(py_file):
+                return None
+            return mixin.from_function.__func__(cls, py_func, py_file)
+
+    impl._locator_classes.insert(0, BiafcCacheLocator)
+
+
+def kernel_cached_on_disk() -> bool:
+    """Whether a compiled kernel is on disk in :func:`kernel_cache_dir` (cheap; a stale one,
+    from other sources or another numba, still recompiles)."""
+    try:
+        return any(kernel_cache_dir().rglob("kernel.run_batch-*.nbi"))
+    except OSError:
+        return False
+
+
+def kernel_loaded() -> bool:
+    """Whether this process has the kernel compiled or loaded already."""
+    from sim_backend.dem.kernel import run_batch
+
+    return bool(run_batch.signatures)
+
+
+def set_compile_reporter(reporter: CompileReporter | None) -> CompileReporter | None:
+    """Set who hears of a first-use compilation; returns the previous reporter."""
+    global _REPORTER
+    old, _REPORTER = _REPORTER, reporter
+    return old
+
+
+def announce_if_cold() -> bool:
+    """Tell the reporter now, before the first run is set up, when no compiled kernel is on disk
+    (the notice then comes within the first seconds of a command, not when the first point is
+    reached); :func:`compile_notice` then reports only the progress and the end."""
+    global _ANNOUNCED
+    reporter = _REPORTER
+    if reporter is None or _ANNOUNCED or kernel_cached_on_disk():
+        return False
+    from sim_backend.dem.kernel import run_batch
+
+    if run_batch.signatures:
+        return False
+    _ANNOUNCED = True
+    reporter("start", 0.0, kernel_cache_dir(), True)
+    return True
+
+
+@contextmanager
+def compile_notice(delay_s: float = 1.0, tick_s: float = 1.0) -> Iterator[None]:
+    """Wrap the kernel's first call: report at once when nothing is on disk (a compilation),
+    after ``delay_s`` otherwise (a stale cache compiles too; a fresh one loads in well under
+    that), then every ``tick_s`` and at the end."""
+    reporter = _REPORTER
+    global _ANNOUNCED
+    if reporter is None or kernel_loaded():
+        yield
+        return
+    cold = not kernel_cached_on_disk()
+    folder = kernel_cache_dir()
+    t0 = time.monotonic()
+    stop = threading.Event()
+    started = threading.Event()
+
+    def watch() -> None:
+        if stop.wait(0.0 if cold else delay_s):
+            return
+        started.set()
+        if not _ANNOUNCED:
+            reporter("start", time.monotonic() - t0, folder, cold)
+        while not stop.wait(tick_s):
+            reporter("tick", time.monotonic() - t0, folder, cold)
+
+    thread = threading.Thread(target=watch, name="biafc-compile-notice", daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        thread.join()
+        if started.is_set():
+            reporter("done", time.monotonic() - t0, folder, cold)
+        _ANNOUNCED = False
