@@ -48,8 +48,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from analysis.calibrate import CalibrationError, calibrate, parse_fit
-    from protocols.runfile import RunFileError, read_run
-    from sim_backend.dem import ChainFileError, load_chain_spec
+    from daq.cli.run_input import read_run_and_chain
 
     path: Path = args.run_file
     if not path.exists():
@@ -58,18 +57,7 @@ def run(args: argparse.Namespace) -> int:
         names = parse_fit(args.fit)
     except CalibrationError as exc:
         raise CliError(str(exc)) from None
-    try:
-        data = read_run(path)
-    except (RunFileError, OSError, KeyError) as exc:
-        raise CliError(f"{path}: cannot read as a run file ({exc})") from exc
-    if not data.scans:
-        raise CliError(f"{path}: the run file holds no scan")
-    spec = None
-    if args.chain is not None:
-        try:
-            spec = load_chain_spec(args.chain)
-        except ChainFileError as exc:
-            raise CliError(str(exc)) from None
+    data, spec = read_run_and_chain(path, args.chain)
     try:
         result = calibrate(data, names, chain_spec=spec, nonlinear=args.nonlinear)
     except CalibrationError as exc:

@@ -51,24 +51,10 @@ def parse_stroke(text: str) -> float:
 
 def run(args: argparse.Namespace) -> int:
     from analysis.compare_report import compare_run
-    from protocols.runfile import RunFileError, read_run
-    from sim_backend.dem import ChainFileError, load_chain_spec
+    from daq.cli.run_input import read_run_and_chain
 
     path: Path = args.run_file
-    if not path.exists():
-        raise CliError(f"run file {path} does not exist")
-    try:
-        data = read_run(path)
-    except (RunFileError, OSError, KeyError) as exc:
-        raise CliError(f"{path}: cannot read as a run file ({exc})") from exc
-    if not data.scans:
-        raise CliError(f"{path}: the run file holds no scan")
-    spec = None
-    if args.chain is not None:
-        try:
-            spec = load_chain_spec(args.chain)
-        except ChainFileError as exc:
-            raise CliError(str(exc)) from None
+    data, spec = read_run_and_chain(path, args.chain)
     stroke = parse_stroke(args.piezo_stroke) if args.piezo_stroke else None
     out = args.out or path.with_name(f"{path.stem}_compare")
     try:
