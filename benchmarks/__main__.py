@@ -2,8 +2,10 @@
 
 Each benchmark is a module ``benchmarks/<name>.py`` with ``run() -> dict``. The dict holds the
 benchmark's figures (flat keys such as ``wall_s``) and optionally ``table``: a list of row dicts
-printed as a table. The whole dict is written to ``benchmarks/results/<name>.json`` together with
-the machine it ran on. ``python -m benchmarks --list`` lists them.
+printed as a table. The whole dict is written to ``benchmarks/runs/<name>.json`` (untracked)
+together with the machine it ran on, and each number is printed beside the recorded reference
+in ``benchmarks/results/<name>.json`` (tracked; replace it by hand, with a commit, when a new
+result is to become the reference). ``python -m benchmarks --list`` lists them.
 """
 
 from __future__ import annotations
@@ -20,7 +22,23 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-RESULTS = Path(__file__).resolve().parent / "results"
+#: where new results go (untracked, see .gitignore)
+RESULTS = Path(__file__).resolve().parent / "runs"
+#: the recorded results new ones are compared with (tracked)
+REFERENCE = Path(__file__).resolve().parent / "results"
+
+
+def compare_with_reference(result: dict[str, Any], reference: dict[str, Any]) -> list[str]:
+    """Lines ``key: new (reference ref, new/ref x.xx)`` for the numbers both hold."""
+    lines = []
+    for key, value in result.items():
+        ref = reference.get(key)
+        numbers = (int, float)
+        if key == "total_s" or isinstance(value, bool) or isinstance(ref, bool):
+            continue
+        if isinstance(value, numbers) and isinstance(ref, numbers) and ref != 0:
+            lines.append(f"{key}: {value:.4g} (reference {ref:.4g}, new/ref {value / ref:.3g})")
+    return lines
 
 
 def available() -> list[str]:
@@ -90,6 +108,17 @@ def _run_one(name: str) -> None:
     for key, value in result.items():
         if key not in ("table", "machine") and not isinstance(value, dict | list):
             print(f"{key}: {value:.4g}" if isinstance(value, float) else f"{key}: {value}")
+    ref_path = REFERENCE / f"{name}.json"
+    if ref_path.is_file():
+        try:
+            reference = json.loads(ref_path.read_text())
+        except ValueError:
+            reference = {}
+        lines = compare_with_reference(result, reference)
+        if lines:
+            when = reference.get("machine", {}).get("date", "?")
+            print(f"-- against the recorded reference ({when}):")
+            print("\n".join(lines))
     out = RESULTS / f"{name}.json"
     out.write_text(json.dumps(result, indent=2, default=str) + "\n")
     print(f"written {out.relative_to(Path.cwd()) if out.is_relative_to(Path.cwd()) else out}")
