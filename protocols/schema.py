@@ -24,6 +24,8 @@ Load with :func:`load_protocol`; every error is one line ``FILE:LINE: field: mes
 from __future__ import annotations
 
 import math
+import re
+import string
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -166,6 +168,12 @@ class AcquisitionSpec(_Model):
         return round(self.pre_trigger * r) + round(self.duration * r)
 
 
+#: a protocol name: it becomes part of the run file's name
+_SAFE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}")
+#: the fields an output pattern may use
+_OUTPUT_FIELDS = frozenset({"name", "timestamp", "date"})
+
+
 class Protocol(_Model):
     """A validated protocol. Quantities are SI floats; amplitudes via :meth:`amplitude_values`."""
 
@@ -182,6 +190,40 @@ class Protocol(_Model):
     output: str = "runs/{name}_{timestamp}.h5"
     on_point_failure: Literal["continue", "stop"] = "continue"
     retries: int = Field(default=2, ge=0, le=100)
+
+    @field_validator("name")
+    @classmethod
+    def _safe_name(cls, v: str) -> str:
+        if not _SAFE_NAME.fullmatch(v):
+            raise ValueError(
+                f"{v!r}: use letters, digits, '.', '_' and '-' (1 to 64 characters, starting "
+                "with a letter or digit); it becomes part of a file name"
+            )
+        return v
+
+    @field_validator("output")
+    @classmethod
+    def _known_fields_only(cls, v: str) -> str:
+        if any(c in v for c in "\0\n\r"):
+            raise ValueError("the output pattern holds a NUL byte or a line break")
+        try:
+            parts = list(string.Formatter().parse(v))
+        except ValueError as exc:
+            raise ValueError(
+                f"bad pattern ({exc}); use {{name}}, {{timestamp}}, {{date}}"
+            ) from None
+        for _, field, spec, conversion in parts:
+            if field is None:
+                continue
+            if field not in _OUTPUT_FIELDS or spec or conversion:
+                shown = (
+                    field + (f"!{conversion}" if conversion else "") + (f":{spec}" if spec else "")
+                )
+                raise ValueError(
+                    f"{{{shown}}} is not allowed in the output pattern; use only {{name}}, "
+                    "{timestamp} and {date}, with no attribute, index, conversion or format"
+                )
+        return v
 
     @field_validator("amplitudes", mode="before")
     @classmethod

@@ -1,0 +1,36 @@
+"""Names and output patterns that would escape runs/, collide or evaluate code are refused in
+one line before anything runs (issue 15, names and paths)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from protocols.schema import parse_protocol
+from protocols.yamlfile import ConfigError
+
+SMOKE = (Path(__file__).parents[2] / "protocols" / "smoke.yaml").read_text()
+PATTERN = 'output: "runs/{name}_{timestamp}.h5"'
+
+
+@pytest.mark.parametrize("name", ["../../x", "'a\\0b'", '"a\\nb"', "'a b'", "x" * 65])
+def test_unsafe_names_are_refused(name: str) -> None:
+    with pytest.raises(ConfigError) as info:
+        parse_protocol(SMOKE.replace("name: smoke", f"name: {name}"))
+    msg = str(info.value)
+    assert ":2: name:" in msg and "letters, digits" in msg and "\n" not in msg
+
+
+@pytest.mark.parametrize(
+    "pattern",
+    ["{name.__class__}.h5", "{name.upper}.h5", "{name!r}.h5", "{0}.h5", "{name:>99}.h5"],
+)
+def test_output_pattern_takes_only_the_known_fields(pattern: str) -> None:
+    with pytest.raises(ConfigError, match="not allowed in the output pattern"):
+        parse_protocol(SMOKE.replace(PATTERN, f'output: "{pattern}"'))
+
+
+def test_plain_pattern_and_name_still_work() -> None:
+    pf = parse_protocol(SMOKE.replace(PATTERN, 'output: "runs/{name}_{date}.h5"'))
+    assert pf.protocol.output_path().name.startswith("smoke_")
