@@ -97,17 +97,10 @@ def run(args: argparse.Namespace) -> int:
         if getattr(args, name) is not None:
             raise CliError(f"--{name} applies only with --alpha-sweep")
     from analysis.report import write_figures
-    from protocols.runfile import RunFileError, read_run
+    from daq.cli.run_input import read_run_file
 
     path: Path = args.run_file
-    if not path.exists():
-        raise CliError(f"run file {path} does not exist")
-    try:
-        data = read_run(path)
-    except (RunFileError, OSError, KeyError) as exc:
-        raise CliError(f"{path}: cannot read as a run file ({exc})") from exc
-    if not data.scans:
-        raise CliError(f"{path}: the run file holds no scan")
+    data = read_run_file(path)
     out = args.out or path.with_name(f"{path.stem}_figures")
     try:
         report = write_figures(data, out)

@@ -1,5 +1,5 @@
-"""The inputs of the commands that put the model beside a run (``biafc compare``, ``biafc
-calibrate``): the run file, read whole, and the chain file the model starts from."""
+"""The inputs of the commands that read a run file (``biafc figures``, ``biafc compare``,
+``biafc calibrate``): the run file, read whole, and the chain file the model starts from."""
 
 from __future__ import annotations
 
@@ -8,14 +8,13 @@ from typing import Any
 
 from daq.cli.biafc import CliError
 
-__all__ = ["read_run_and_chain"]
+__all__ = ["read_run_and_chain", "read_run_file"]
 
 
-def read_run_and_chain(path: Path, chain: Path | None) -> tuple[Any, Any]:
-    """``(RunData, ChainSpec | None)``; a missing or unreadable run file, a file without a scan
-    or a bad chain file is a :class:`CliError` (one line)."""
+def read_run_file(path: Path) -> Any:
+    """The whole run file (``RunData``); a missing or unreadable file, or one without a scan,
+    is a :class:`CliError` (one line)."""
     from protocols.runfile import RunFileError, read_run
-    from sim_backend.dem import ChainFileError, load_chain_spec
 
     if not path.exists():
         raise CliError(f"run file {path} does not exist")
@@ -25,6 +24,15 @@ def read_run_and_chain(path: Path, chain: Path | None) -> tuple[Any, Any]:
         raise CliError(f"{path}: cannot read as a run file ({exc})") from exc
     if not data.scans:
         raise CliError(f"{path}: the run file holds no scan")
+    return data
+
+
+def read_run_and_chain(path: Path, chain: Path | None) -> tuple[Any, Any]:
+    """``(RunData, ChainSpec | None)`` as :func:`read_run_file`; a bad chain file is a
+    :class:`CliError` too."""
+    from sim_backend.dem import ChainFileError, load_chain_spec
+
+    data = read_run_file(path)
     spec = None
     if chain is not None:
         try:
