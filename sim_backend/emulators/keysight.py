@@ -21,8 +21,6 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from instruments.transport.block import parse_block
-
 __all__ = ["ChannelState", "KeysightEmulator", "scpi_short"]
 
 IDN = "Keysight Technologies,33522B,MY00000000,4.00-1.19-2.00-58-00"
@@ -31,6 +29,22 @@ MAX_SRATE = 160.0e6
 QUEUE_LEN = 20
 _VOWELS = set("AEIOU")
 _NUM = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$")
+
+
+def _arbitrary_block(raw: bytes) -> tuple[bytes, bytes]:
+    """IEEE 488.2 definite-length arbitrary block (7.7.6.2): ``#``, one non-zero digit ``n``,
+    ``n`` digits giving the byte count, then exactly that many bytes. Returns (payload, rest).
+    Written here from the standard, not shared with the driver's encoder."""
+    if raw[:1] != b"#" or len(raw) < 2 or raw[1] not in b"123456789":
+        raise ValueError("not a definite-length block")
+    n = raw[1] - ord("0")
+    count = raw[2 : 2 + n]
+    if len(count) != n or not all(c in b"0123456789" for c in count):
+        raise ValueError("block byte count is not n digits")
+    end = 2 + n + int(count)
+    if len(raw) < end:
+        raise ValueError("block shorter than its byte count")
+    return raw[2 + n : end], raw[end:]
 
 
 def scpi_short(token: str) -> str:
@@ -128,7 +142,7 @@ class KeysightEmulator:
         i = message.find(b"#")
         if i >= 0 and b"DATA" in message[:i].upper():
             try:
-                block, rest = parse_block(message[i:])
+                block, rest = _arbitrary_block(message[i:])
             except ValueError:
                 self.push_error(-161, "Invalid block data")
                 return None

@@ -167,3 +167,25 @@ def test_stage_move_timeout_stops_axis(clock: SimClock) -> None:
     with pytest.raises(InstrumentTimeout, match="not finished"):
         stage.move_to(0.1)
     assert not emu.busy()
+
+
+EIGHT_POINTS = bytes(16)  # 8 DAC codes of 0, the emulator's minimum
+
+
+@pytest.mark.parametrize(
+    ("block", "accepted"),
+    [
+        (b"#216" + EIGHT_POINTS, True),  # n = 2 digits, 16 bytes
+        (b"#3016" + EIGHT_POINTS, True),  # leading zero in a 3-digit count
+        (b"#217" + EIGHT_POINTS, False),  # announces 17, holds 16
+        (b"#016" + EIGHT_POINTS, False),  # n = 0 (the indefinite form) is no definite block
+        (b"#2x6" + EIGHT_POINTS, False),  # count not a digit
+    ],
+)
+def test_emulator_parses_arbitrary_blocks_by_the_standard(
+    clock: SimClock, block: bytes, accepted: bool
+) -> None:
+    """IEEE 488.2 definite-length blocks as raw bytes, independent of the driver's encoder."""
+    gen, emu = make_generator(clock)
+    emu.handle(b"SOUR1:DATA:ARB:DAC X," + block)
+    assert ("-161,Invalid block data" in gen.errors()) is not accepted
