@@ -137,64 +137,29 @@ class Progress:
             self.display.close()
 
 
-def _load(args: argparse.Namespace) -> tuple[Any, Any, Any]:
-    """Protocol, bench and plan; with ``--resume`` whatever is not given comes from the file."""
-    from daq.engine import make_plan
-    from daq.store import StoreError, check_output_path, stored_request
-    from protocols.bench import load_bench
-    from protocols.schema import load_protocol, shipped_protocols
-    from protocols.yamlfile import ConfigError
+def _request(args: argparse.Namespace) -> Any:
+    """The whole request (protocol x bench x output x resume file) validated by
+    :func:`daq.request.validate_request`, the one path to a run: nothing is opened or written
+    before it says yes; a refusal is one line (exit 2)."""
+    from daq.request import RequestError, validate_request
 
-    if args.protocol is None and args.resume is None:
-        names = ", ".join(shipped_protocols())
-        raise CliError(
-            "give a protocol (a file, or a shipped one: "
-            f"{names}), or --resume RUN.h5 to continue a run"
-        )
-    stored: tuple[Any, Any] | None = None
-    if args.resume is not None and (args.protocol is None or args.bench is None):
-        try:
-            check_output_path(args.resume, resume=True)
-            stored = stored_request(args.resume)
-        except StoreError as exc:
-            raise CliError(str(exc)) from None
     try:
-        settings = tuple(getattr(args, "settings", ()) or ())
-        if settings and args.resume is not None:
-            raise CliError("--set: not with --resume (the run continues on the file's bench)")
-        pf = load_protocol(args.protocol) if args.protocol is not None else None
-        bf = load_bench(args.bench, chain_set=settings) if args.bench is not None else None
-        if stored is not None:
-            pf, bf = pf or stored[0], bf or stored[1]
-        elif bf is None:
-            bf = load_bench(None, chain_set=settings)
-        assert pf is not None and bf is not None
-        if bf.bench.chain_set:
-            from daq.chain_info import chain_spec
-
-            chain_spec(bf)  # a bad chain setting is refused before anything runs
-        plan = make_plan(pf, bf)
-    except ConfigError as exc:
+        return validate_request(
+            args.protocol,
+            args.bench,
+            out=args.out,
+            resume=args.resume,
+            settings=tuple(getattr(args, "settings", ()) or ()),
+            seed=args.seed,
+            accept_bench_change=getattr(args, "accept_bench_change", False),
+        )
+    except RequestError as exc:
         raise CliError(str(exc)) from None
-    return pf, bf, plan
 
 
 def run(args: argparse.Namespace) -> int:
-    from daq.store import StoreError, check_output_path, stored_seed
-
-    if args.seed is not None and args.seed < 0:
-        raise CliError("--seed: must be >= 0")
-    if args.resume is not None and args.out is not None and args.out != args.resume:
-        raise CliError("--out and --resume name different files; give one")
-    pf, bf, plan = _load(args)
-    resume = args.resume is not None
-    out: Path = args.resume if resume else (args.out or pf.protocol.output_path())
-    if not resume and args.out is not None and args.out.is_dir():
-        out = args.out / pf.protocol.output_path().name  # a folder: the protocol's file name in it
-    try:
-        check_output_path(out, resume=resume)
-    except StoreError as exc:
-        raise CliError(str(exc)) from None
+    req = _request(args)
+    pf, bf, plan, out = req.protocol, req.bench, req.plan, req.out
     if args.dry_run:
         basis = plan.costs.basis if plan.costs is not None else "the plan"
         print(
@@ -203,14 +168,7 @@ def run(args: argparse.Namespace) -> int:
             f"output {out}"
         )
         return 0
-    seed = args.seed
-    if resume and seed is None:
-        seed = stored_seed(out)
-    if seed is None and bf.bench.simulation is not None:
-        seed = bf.bench.simulation.seed
-    return _execute(
-        pf, bf, out, resume, seed, args.quiet, getattr(args, "accept_bench_change", False)
-    )
+    return _execute(pf, bf, out, req.resume, req.seed, args.quiet, req.accept_bench_change)
 
 
 class _Interrupted(KeyboardInterrupt):

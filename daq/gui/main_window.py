@@ -398,7 +398,7 @@ class MainWindow(QMainWindow):
 
     def _validate_text(self, text: str) -> None:
         """Validate the editor's text against the schema and the bench's limits."""
-        from daq.engine import make_plan
+        from daq.request import RequestError, validate_request
         from protocols.schema import parse_protocol
         from protocols.yamlfile import ConfigError
 
@@ -406,12 +406,10 @@ class MainWindow(QMainWindow):
         try:
             pf = parse_protocol(text, source)
             proto = pf.protocol
-            try:
-                proto.output.format(name="x", timestamp="x", date="x")
-            except (KeyError, IndexError, ValueError) as exc:
-                raise pf.error(["output"], f"bad pattern ({exc})") from None
-            plan = make_plan(pf, self.bench_file) if self.bench_file is not None else None
-        except ConfigError as exc:
+            plan = None
+            if self.bench_file is not None:  # the one validation of run_protocol, as typed
+                plan = validate_request(pf, self.bench_file, check_output=False).plan
+        except (ConfigError, RequestError) as exc:
             self.protocol_file, self.plan = None, None
             self.protocol_panel.show_error(str(exc))
             return
@@ -483,7 +481,7 @@ class MainWindow(QMainWindow):
         """Start the protocol (or continue ``resume_path``); connects the bench first if
         needed. Returns False when it cannot start (the reason is logged)."""
         from daq.engine import RunEngine
-        from daq.store import StoreError, check_output_path, stored_seed
+        from daq.request import RequestError, validate_request
 
         if self.running:
             return False
@@ -493,23 +491,26 @@ class MainWindow(QMainWindow):
         if self.protocol_file is None or self.plan is None:
             self.log("cannot start: the protocol is not valid (see the protocol panel)", "error")
             return False
+        resume = resume_path is not None
+        try:  # the whole request, output and resume file included, before connecting
+            req = validate_request(
+                self.protocol_file,
+                self.bench_file,
+                out=None if resume else self._output_path(),
+                resume=resume_path,
+            )
+        except RequestError as exc:  # refused before anything moved, as run_protocol's exit 2
+            self.log(f"cannot start: {exc}", "error")
+            self.run_panel.set_state("idle")
+            self.run_panel.where_label.setText(f"run refused: {exc}")
+            self.run_panel.where_label.setStyleSheet("QLabel { color: #b00000; }")
+            return False
         if self.instruments is None:
             self._pending_start = (resume_path,)
             self.run_panel.set_state("starting")
             self.connect_bench()
             return True
-        resume = resume_path is not None
-        out = resume_path if resume_path is not None else self._output_path()
-        try:
-            check_output_path(out, resume=resume)
-            seed = stored_seed(out) if resume else None
-        except (StoreError, OSError) as exc:
-            self.log(f"cannot start: {exc}", "error")
-            self.run_panel.set_state("idle")
-            return False
-        bf = self.bench_file
-        if seed is None and bf.bench.simulation is not None:
-            seed = bf.bench.simulation.seed
+        bf, out, seed = self.bench_file, req.out, req.seed
         try:
             engine = RunEngine(
                 self.protocol_file, bf, self.instruments, out, resume=resume, seed=seed

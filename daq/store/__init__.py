@@ -3,6 +3,7 @@
 from daq.store.run_store import (
     StoreError,
     check_output_path,
+    check_resume,
     create_run,
     resume_run,
     stored_request,
@@ -12,6 +13,7 @@ from daq.store.run_store import (
 __all__ = [
     "StoreError",
     "check_output_path",
+    "check_resume",
     "create_run",
     "resume_run",
     "stored_request",

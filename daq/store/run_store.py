@@ -26,13 +26,14 @@ import numpy as np
 from daq.store.recover import clear_consistency_flags
 from daq.store.resume_check import bench_differences
 from protocols.bench import BenchFile
-from protocols.runfile import ChainInfo, RunFileWriter, ScanSpec, read_run
+from protocols.runfile import ChainInfo, RunFileWriter, ScanSpec
 from protocols.schema import ProtocolFile, parse_protocol
 from protocols.yamlfile import ConfigError
 
 __all__ = [
     "StoreError",
     "check_output_path",
+    "check_resume",
     "create_run",
     "resume_run",
     "stored_request",
@@ -67,6 +68,13 @@ def _run_status(path: Path) -> str | None:
     return status.decode() if isinstance(status, bytes) else str(status)
 
 
+def _complete(path: Path) -> str:
+    return (
+        f"--resume: {path} is complete already, nothing to continue; to measure again "
+        f"write a new file (--out {_free_name(path)})"
+    )
+
+
 def check_output_path(path: Path, *, resume: bool = False) -> None:
     """Refuse a path that cannot take a new run (or, resuming, a missing or complete file);
     each message says what to do instead."""
@@ -78,10 +86,7 @@ def check_output_path(path: Path, *, resume: bool = False) -> None:
         if not os.access(path, os.W_OK):
             raise StoreError(f"--resume: {path} is not writable")
         if _run_status(path) == "complete":
-            raise StoreError(
-                f"--resume: {path} is complete already, nothing to continue; to measure again "
-                f"write a new file (--out {_free_name(path)})"
-            )
+            raise StoreError(_complete(path))
         return
     if path.is_dir():
         raise StoreError(f"--out: {path} is a folder; give a run file name (e.g. {path}/run.h5)")
@@ -105,6 +110,26 @@ def check_output_path(path: Path, *, resume: bool = False) -> None:
         raise StoreError(f"--out: cannot write {path}: {probe} is a file, not a folder")
     if not os.access(probe, os.W_OK | os.X_OK):
         raise StoreError(f"--out: cannot write in {probe} (permission denied)")
+    cannot = _cannot_create_in(probe)
+    if cannot is not None:
+        raise StoreError(f"--out: cannot write in {probe} ({cannot})")
+
+
+def _cannot_create_in(folder: Path) -> str | None:
+    """Why no file can be created in ``folder`` (tried with a temporary file, removed at
+    once: ``os.access`` says yes to root everywhere, also in ``/proc``), or ``None``."""
+    import tempfile
+
+    try:
+        fd, name = tempfile.mkstemp(prefix=".biafc-probe-", dir=folder)
+    except OSError as exc:
+        return exc.strerror or str(exc)
+    os.close(fd)
+    try:
+        os.unlink(name)
+    except OSError:
+        pass
+    return None
 
 
 def create_run(
@@ -164,6 +189,93 @@ def stored_request(path: Path) -> tuple[ProtocolFile, BenchFile]:
     return pf, bf
 
 
+def _protocol_differences(stored: ProtocolFile, given: ProtocolFile) -> list[str]:
+    """``"averages: 2 in the file, 3 now"`` for each top-level field that differs."""
+    a, b = stored.protocol.model_dump(), given.protocol.model_dump()
+    return [
+        f"{k}: {a.get(k)!r} in the file, {b.get(k)!r} now"
+        for k in sorted(set(a) | set(b))
+        if a.get(k) != b.get(k)
+    ]
+
+
+def check_resume(
+    path: Path,
+    pf: ProtocolFile,
+    bench: BenchFile | None,
+    axes: Mapping[str, tuple[Any, Any]],
+    *,
+    accept_bench_change: bool = False,
+    n_samples: int | None = None,
+) -> list[str]:
+    """Whether ``path`` may be continued with protocol ``pf`` on ``bench``; reads only the
+    file's attributes and scan axes (never its records), so it runs before any instrument is
+    connected (``daq.request``) and again as the writer opens the file (:func:`resume_run`).
+
+    ``axes``: direction -> (amplitudes ``[A]``, cylinders ``[C]``) this request measures;
+    ``n_samples``: the record length it expects (``None``: not compared). Returns the bench
+    differences accepted with ``accept_bench_change`` (empty when the benches match); raises
+    :class:`StoreError` (one line) for a file that is no run file, complete, started with
+    another protocol or a modified one, on another bench, or with other scan axes."""
+    from protocols.runfile import DIRECTIONS, RunFileError, open_for_reading, stored_texts
+
+    try:
+        protocol_yaml, bench_yaml = stored_texts(path)  # refuses a file that is no run file
+        with open_for_reading(path) as f:
+            status = f.attrs.get("status", "")
+            scans: dict[str, tuple[Any, Any, int]] = {}
+            for d in DIRECTIONS if "scan" in f else ():
+                if d not in f["scan"]:
+                    continue
+                g = f["scan"][d]
+                scans[d] = (g["amplitudes"][...], g["cylinders"][...], g["time"].shape[0])
+    except (OSError, RunFileError, KeyError, ValueError, TypeError) as exc:
+        raise StoreError(f"--resume: {str(exc).splitlines()[0]}") from None
+    text = {"protocol_yaml": protocol_yaml, "bench_yaml": bench_yaml}
+    if (status.decode() if isinstance(status, bytes) else str(status)) == "complete":
+        raise StoreError(_complete(path))
+    try:
+        stored = parse_protocol(text["protocol_yaml"], f"{path}:protocol_yaml")
+    except ConfigError as exc:
+        raise StoreError(f"--resume: the protocol stored in {path} is unreadable ({exc})") from None
+    if stored.protocol.model_dump() != pf.protocol.model_dump():
+        same_name = stored.protocol.name == pf.protocol.name
+        what = (
+            f"protocol {pf.protocol.name!r} as it was then ("
+            + "; ".join(_protocol_differences(stored, pf)[:3])
+            + ")"
+            if same_name
+            else f"{stored.protocol.name!r}, not {pf.protocol.name!r}"
+        )
+        raise StoreError(
+            f"--resume: {path} was started with another protocol ({what}); "
+            "give the same protocol file"
+        )
+    diffs: list[str] = []
+    if bench is not None:
+        diffs = bench_differences(text["bench_yaml"], bench, str(path))
+        if diffs and not accept_bench_change:
+            raise StoreError(
+                f"--resume: {path} was started on another bench ({len(diffs)} difference(s): "
+                + "; ".join(diffs)
+                + "); resume on the same bench, or give --accept-bench-change to record "
+                "the change in the file"
+            )
+    for direction, (amplitudes, cylinders) in axes.items():
+        got = scans.get(direction)
+        if (
+            got is None
+            or not np.array_equal(got[0], amplitudes)
+            or not np.array_equal(got[1], cylinders)
+            or (n_samples is not None and got[2] != n_samples)
+        ):
+            raise StoreError(
+                f"--resume: the {direction} scan in {path} does not match this protocol "
+                "on this bench"
+            )
+    return diffs
+
+
 def resume_run(
     path: Path,
     pf: ProtocolFile,
@@ -176,58 +288,37 @@ def resume_run(
     (:class:`StoreError`) when the protocol, the bench or the scan axes differ. With
     ``accept_bench_change`` a different bench is accepted and recorded in the file (root
     attribute ``bench_overrides_json``: a list of {time, differences, bench_yaml})."""
-    try:
-        run = read_run(path)
-    except (OSError, ValueError) as exc:
-        raise StoreError(f"--resume: {exc}") from None
-    if run.status == "complete":
-        raise StoreError(f"--resume: {path} is complete already")
-    try:
-        stored = parse_protocol(str(run.attrs.get("protocol_yaml", "")), f"{path}:protocol_yaml")
-    except ConfigError as exc:
-        raise StoreError(f"--resume: the protocol stored in {path} is unreadable ({exc})") from None
-    if stored.protocol.model_dump() != pf.protocol.model_dump():
-        raise StoreError(
-            f"--resume: {path} was started with another protocol ({stored.protocol.name!r}); "
-            "give the same protocol file"
-        )
+    diffs = check_resume(
+        path,
+        pf,
+        bench,
+        {s.direction: (s.amplitudes, s.cylinders) for s in scans},
+        accept_bench_change=accept_bench_change,
+        n_samples=scans[0].time_s.shape[0] if scans else None,
+    )
     from daq.store.provenance import provenance_attrs
+    from protocols.runfile import open_for_reading
 
+    try:
+        with open_for_reading(path) as f:
+            prior = {k: f.attrs.get(k, "[]") for k in ("resumes_json", "bench_overrides_json")}
+    except OSError as exc:
+        raise StoreError(f"--resume: {exc}") from None
+    prior = {k: v.decode() if isinstance(v, bytes) else str(v) for k, v in prior.items()}
     extra: dict[str, Any] = {}
-    resumes = json.loads(str(run.attrs.get("resumes_json", "[]")) or "[]")
+    resumes = json.loads(prior["resumes_json"] or "[]")
     resumes.append(provenance_attrs())
     extra["resumes_json"] = json.dumps(resumes)
-    if bench is not None:
-        diffs = bench_differences(str(run.attrs.get("bench_yaml", "")), bench, str(path))
-        if diffs and not accept_bench_change:
-            raise StoreError(
-                f"--resume: {path} was started on another bench ({len(diffs)} difference(s): "
-                + "; ".join(diffs)
-                + "); resume on the same bench, or give --accept-bench-change to record "
-                "the change in the file"
-            )
-        if diffs:
-            old = json.loads(str(run.attrs.get("bench_overrides_json", "[]")) or "[]")
-            old.append(
-                {
-                    "time": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
-                    "differences": diffs,
-                    "bench_yaml": bench.text,
-                }
-            )
-            extra["bench_overrides_json"] = json.dumps(old)
-    for spec in scans:
-        got = run.scans.get(spec.direction)
-        if (
-            got is None
-            or not np.array_equal(got.amplitudes, spec.amplitudes)
-            or not np.array_equal(got.cylinders, spec.cylinders)
-            or got.time_s.shape != spec.time_s.shape
-        ):
-            raise StoreError(
-                f"--resume: the {spec.direction} scan in {path} does not match this protocol "
-                "on this bench"
-            )
+    if bench is not None and diffs:
+        old = json.loads(prior["bench_overrides_json"] or "[]")
+        old.append(
+            {
+                "time": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+                "differences": diffs,
+                "bench_yaml": bench.text,
+            }
+        )
+        extra["bench_overrides_json"] = json.dumps(old)
     clear_consistency_flags(path)  # a writer killed under SWMR leaves them set
     try:
         return RunFileWriter.open_existing(path, extra_attrs=extra)
