@@ -24,6 +24,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "calibrate": ("calibrate", "fit the chain model to a scan's linear points"),
     "repair": ("repair", "make a run file left by a killed writer readable by any reader"),
     "check": ("check", "preflight: every instrument against the bench file"),
+    "study": ("study", "a design study on the model, on Dask (serial, local or a cluster)"),
     "gui": ("gui", "the bench window"),
     "warmup": ("warmup", "compile the DEM kernel ahead of time (it happens once)"),
 }

@@ -65,3 +65,16 @@ def test_sweep_refuses_bad_requests_in_one_line(chain: dem.Chain) -> None:
         with pytest.raises(ValueError) as info:
             sweep(chain, d, duration_s=1e-3, **kwargs)  # type: ignore[arg-type]
         assert "\n" not in str(info.value)
+
+
+def test_sweep_keeps_the_integrators_error_estimate_per_trajectory(chain: dem.Chain) -> None:
+    drives = _drives(chain, 3)  # 6 trajectories, blocks of 4
+    kw = {"duration_s": 2e-3, "sample_rate_Hz": 250e3}
+    full = dem.simulate(chain, drives, cylinders=[31], error_estimate=True, **kw)
+    res = sweep(chain, drives, cylinders=[31], keep="metrics", reduce=band_metrics,
+                block_size=4, error_estimate=True, **kw)  # fmt: skip
+    est = res.metrics["error_estimate_rel"]
+    assert est.shape == (6,) and np.all((est > 0) & (est < 1e-3))
+    np.testing.assert_array_equal(est, full.meta["error_estimate_rel"])
+    assert "error_estimate_rel" not in sweep(chain, drives[:1], keep="metrics",
+                                             reduce=band_metrics, **kw).metrics  # fmt: skip

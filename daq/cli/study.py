@@ -1,0 +1,169 @@
+"""``biafc study STUDY.yaml [--scheduler ADDRESS] [--workers N] [--out study.h5]``.
+
+A design study on the DEM (the study file: :mod:`protocols.study`; shipped ones by name,
+e.g. ``biafc study example``). Every cell is checked before any task is sent: a bad study
+file, a parameter value no chain can have, or an output made from another study is refused
+in one line (exit 2). Cells run on ``dask.distributed`` (:mod:`daq.study_runner`): a
+LocalCluster of ``--workers`` processes by default (all cores), ``--workers 0`` serially in
+this process, ``--scheduler tcp://host:8786`` on a running cluster. Results go into the
+output as tasks finish; run the same command again to continue an interrupted study (cells
+already in the output are skipped).
+
+Exit status: 0 every cell ran within the accuracy asked for, 4 finished with failed or
+inaccurate cells (counted in the last line), 1 the study failed (a task raised), 2 refused,
+130 interrupted (the output keeps every finished task; run again to continue).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from daq.cli.biafc import CliError
+
+__all__ = ["add_arguments", "run"]
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("study", help="study file (YAML), or the name of a shipped study")
+    parser.add_argument(
+        "--out", type=Path, default=None, help="output (HDF5); default: NAME.h5 here"
+    )
+    parser.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        help="LocalCluster worker processes (default: the cores); 0: serially in this process",
+    )
+    parser.add_argument(
+        "--scheduler", default=None, help="address of a running Dask scheduler (tcp://host:8786)"
+    )
+    parser.add_argument("--dry-run", action="store_true", help="check and count, run nothing")
+    parser.add_argument("-q", "--quiet", action="store_true", help="no progress display")
+
+
+def run(args: argparse.Namespace) -> int:
+    from analysis.study_cells import (
+        StudySetup,
+        check_cells,
+        spectrum_grid_Hz,
+        stored_names,
+        task_cells,
+    )
+    from daq.store.lock import FileInUse, RunFileLock
+    from protocols.study import cell_table, load_study
+    from protocols.studyfile import StudyFileError, StudyStore
+    from protocols.yamlfile import ConfigError
+    from sim_backend.dem.spec import ChainFileError, default_chain_spec, load_chain_spec
+
+    if args.workers is not None and args.workers < 0:
+        raise CliError("--workers: 0 (serial) or more")
+    if args.workers is not None and args.scheduler is not None:
+        raise CliError("--workers and --scheduler: give one (the cluster has its own workers)")
+    try:
+        sf = load_study(args.study)
+    except ConfigError as exc:
+        raise CliError(str(exc)) from None
+    study = sf.study
+    try:
+        base = load_chain_spec(sf.chain_path) if sf.chain_path else default_chain_spec()
+    except ChainFileError as exc:
+        raise CliError(str(sf.error(("chain",), str(exc)))) from None
+    table = cell_table(study)
+    setup = StudySetup(study, base.model_dump_json(), table.names)
+    bad = check_cells(setup, table)
+    if bad is not None:
+        raise CliError(str(sf.error(("parameters", bad[0]), bad[1])))
+    digest = sf.digest(base.to_yaml())
+    tasks = task_cells(table.n_cells, study.run.cells_per_task)
+    out: Path = args.out if args.out is not None else Path(f"{study.name}.h5")
+    if args.dry_run:
+        _announce(study, table, tasks, out)
+        return 0
+    lock = RunFileLock(out)
+    try:
+        lock.acquire()
+    except FileInUse as exc:
+        raise CliError(str(exc)) from None
+    try:
+        try:
+            if out.exists():
+                store = StudyStore.open(out, digest=digest, table=table)
+            else:
+                grid = spectrum_grid_Hz(study) if study.record_spectra else None
+                store = StudyStore.create(
+                    out, name=study.name, study_yaml=sf.text, digest=digest,
+                    chain_yaml=base.to_yaml(), table=table,
+                    directions=study.drive.directions, metric_names=stored_names(study),
+                    n_tasks=len(tasks), spectrum_freq_Hz=grid,
+                )  # fmt: skip
+        except StudyFileError as exc:
+            raise CliError(str(exc)) from None
+        _announce(study, table, tasks, out)
+        return _run(args, setup, table, store)
+    finally:
+        lock.release()
+
+
+def _announce(study: Any, table: Any, tasks: list[Any], out: Path) -> None:
+    n_dirs = len(study.drive.directions)
+    print(
+        f"study {study.name}: {table.n_cells} cells ({n_dirs} DEM runs each) in "
+        f"{len(tasks)} tasks, output {out}",
+        file=sys.stderr,
+    )
+
+
+def _run(args: argparse.Namespace, setup: Any, table: Any, store: Any) -> int:
+    import numpy as np
+
+    from analysis.study_cells import STATUS_FAILED, STATUS_INACCURATE
+    from daq.progress import ProgressDisplay
+    from daq.study_runner import dask_client, run_study
+
+    done0 = int(store.done().sum())
+    if done0:
+        print(f"continuing: {done0} of {table.n_cells} cells done already", file=sys.stderr)
+    status = "failed"
+    t0 = time.perf_counter()
+    try:
+        with ProgressDisplay(
+            table.n_cells, unit="cell", label="study", quiet=args.quiet, start_done=done0
+        ) as progress:
+
+            def on_task(i: int, res: Any, n_done: int) -> None:
+                progress.update(n_done, detail=f"task {i}")
+
+            if args.workers == 0:
+                summary = run_study(setup, table, store, on_task=on_task)
+            else:
+                workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
+                with dask_client(workers, args.scheduler) as client:
+                    summary = run_study(setup, table, store, client=client, on_task=on_task)
+        status = "complete"
+    except KeyboardInterrupt:
+        status = "incomplete"
+        raise
+    except Exception as exc:
+        first = str(exc).splitlines()[0] if str(exc) else ""
+        print(f"biafc study: failed: {type(exc).__name__}: {first}", file=sys.stderr)
+        print("the output keeps every finished task; run again to continue", file=sys.stderr)
+        return 1
+    finally:
+        codes = store.f["cells/status"][...] if store.f.id.valid else np.zeros(0)
+        store.close(status)
+    failed = int(np.sum(codes == STATUS_FAILED))
+    inaccurate = int(np.sum(codes == STATUS_INACCURATE))
+    wall = time.perf_counter() - t0
+    rate = summary.cells_run / wall if wall > 0 else float("nan")
+    print(
+        f"study complete: {summary.cells_run} cells run ({summary.cells_skipped} done before) "
+        f"in {wall:.1f} s, {rate:.3g} cells/s on {summary.engine}; "
+        f"{failed} failed, {inaccurate} above max_error; written {store.path}",
+        file=sys.stderr,
+    )
+    return 4 if failed or inaccurate else 0

@@ -1,0 +1,162 @@
+"""Running a design study's tasks: in this process, on a LocalCluster, or on a Dask cluster.
+
+The engine is ``dask.distributed``: ``workers=0`` runs the tasks one after the other in this
+process (debugging, profiling); ``workers=N`` starts a ``LocalCluster`` of N worker processes
+(one thread each, and ``cores / N`` numba threads each so that the cores are not
+oversubscribed); ``scheduler="tcp://host:8786"`` uses a running cluster (``dask scheduler`` and
+``dask worker`` on a few PCs, or dask-jobqueue on SLURM: docs/studies.md).
+
+Tasks (:func:`analysis.study_cells.task_cells`) are submitted a few per worker at a time and
+their results written into the output as they finish (``as_completed``): the client holds the
+parameter table and at most ``in_flight`` small results, whatever the size of the study. A
+worker that dies loses only its tasks, which the scheduler runs again elsewhere; the numbers do
+not depend on where or with which other cells a cell runs (bit for bit, ``tests/study``).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from analysis.study_cells import StudySetup, TaskResult, run_task, task_cells
+from protocols.study import CellTable
+from protocols.studyfile import StudyStore
+
+__all__ = ["RunSummary", "dask_client", "run_study"]
+
+#: callback after each task is written: (task number, its result, cells done so far)
+TaskCallback = Callable[[int, TaskResult, int], None]
+
+
+@dataclass
+class RunSummary:
+    """What a run did: tasks and cells run now, cells skipped (done before), wall time (s),
+    the summed task time (s, measured inside the tasks) and the engine's name."""
+
+    tasks_run: int
+    cells_run: int
+    cells_skipped: int
+    wall_s: float
+    task_s: float
+    engine: str
+
+
+def _numba_threads_env(n_workers: int) -> dict[str, str]:
+    cores = os.cpu_count() or 1
+    per = str(max(1, cores // max(1, n_workers)))
+    return {
+        "NUMBA_NUM_THREADS": per,
+        "OMP_NUM_THREADS": "1",
+        "OPENBLAS_NUM_THREADS": "1",
+        "MKL_NUM_THREADS": "1",
+    }
+
+
+@contextmanager
+def dask_client(workers: int, scheduler: str | None = None) -> Iterator[Any]:
+    """A ``distributed.Client``: of the cluster at ``scheduler``, or of a new LocalCluster of
+    ``workers`` processes (closed on exit)."""
+    from distributed import Client, LocalCluster
+
+    if scheduler is not None:
+        client = Client(scheduler, timeout="30s")
+        try:
+            yield client
+        finally:
+            client.close()
+        return
+    cluster = LocalCluster(
+        n_workers=workers,
+        threads_per_worker=1,
+        processes=True,
+        dashboard_address=None,
+        silence_logs=logging.ERROR,
+        env=_numba_threads_env(workers),
+    )
+    try:
+        client = Client(cluster)
+        try:
+            yield client
+        finally:
+            client.close()
+    finally:
+        cluster.close()
+
+
+def run_study(
+    setup: StudySetup,
+    table: CellTable,
+    store: StudyStore,
+    *,
+    client: Any | None = None,
+    on_task: TaskCallback | None = None,
+    in_flight_per_worker: int = 2,
+) -> RunSummary:
+    """Run every task of the study with a cell not yet in ``store``; write each result as it
+    comes. ``client=None``: serially in this process. Raises what a task raised (a bug, not a
+    cell's failure: those are recorded per cell)."""
+    t0 = time.perf_counter()
+    tasks = task_cells(table.n_cells, setup.study.run.cells_per_task)
+    done = store.done()
+    skipped = int(done.sum())
+    todo = [i for i, cells in enumerate(tasks) if not np.all(done[cells])]
+    n_done = skipped
+    task_s = 0.0
+
+    def finish(i: int, res: TaskResult) -> None:
+        nonlocal n_done, task_s
+        store.write_task(i, res)
+        n_done += int(res.cells.size)
+        task_s += res.wall_s
+        if on_task is not None:
+            on_task(i, res, n_done)
+
+    if client is None:
+        for i in todo:
+            cells = tasks[i]
+            finish(i, run_task(setup, cells, table.values[cells]))
+        return RunSummary(
+            len(todo), n_done - skipped, skipped, time.perf_counter() - t0, task_s, "serial"
+        )
+
+    from distributed import as_completed
+
+    n_workers = max(1, len(client.scheduler_info().get("workers", {})))
+    limit = max(1, in_flight_per_worker * n_workers)
+    queue = iter(todo)
+
+    outstanding: dict[str, tuple[int, Any]] = {}
+
+    def submit(i: int) -> Any:
+        cells: NDArray[np.int64] = tasks[i]
+        fut = client.submit(run_task, setup, cells, table.values[cells], pure=False)
+        outstanding[fut.key] = (i, fut)
+        return fut
+
+    first = [submit(i) for _, i in zip(range(limit), queue, strict=False)]
+    pending = as_completed(first)
+    try:
+        for fut in pending:
+            i, _ = outstanding.pop(fut.key)
+            res = fut.result()
+            fut.release()
+            finish(i, res)
+            nxt = next(queue, None)
+            if nxt is not None:
+                pending.add(submit(nxt))
+    except BaseException:
+        for _, other in outstanding.values():
+            other.cancel()
+        raise
+    engine = f"dask ({n_workers} workers)"
+    return RunSummary(
+        len(todo), n_done - skipped, skipped, time.perf_counter() - t0, task_s, engine
+    )

@@ -1,0 +1,1 @@
+"""Shipped design studies (``biafc study NAME``)."""

@@ -1,0 +1,298 @@
+"""The study output (HDF5): every cell's parameters and metrics, written task by task.
+
+Layout (``format = "biafc-study"``, ``format_version = 1`` on the root)::
+
+    /                     attrs: name, study_yaml (the study file's text), study_digest (sha256
+                          of what decides the results, with the base chain), chain_yaml,
+                          n_cells, amplitude_kind, directions, status (running | complete |
+                          incomplete | failed), created_utc, software
+    /parameters/<name>    [n_cells] float64, SI (attr unit); amplitude last
+    /cells/point          [n_cells] int64: the design point of each cell
+    /cells/status         [n_cells] int8: 0 not run, 1 ok, 2 inaccurate (above max_error),
+                          3 failed (metrics NaN; /cells/message says why)
+    /cells/message        [n_cells] str
+    /metrics/<name>       [n_cells] float64, NaN until run (attrs unit, description)
+    /spectra/freq_Hz      [F] (only with record_spectra); /spectra/<dir> [n_cells, F] float32
+    /tasks/wall_s         [n_tasks] float64 (NaN until run); /tasks/worker [n_tasks] str
+
+A task's cells are written metrics first and status last, then the file is flushed: a cell
+whose status is not 0 is complete, so a resume (:meth:`StudyStore.open`) skips it. The client
+never holds more than the parameter table and the task in hand.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+from numpy.typing import NDArray
+
+from protocols.study import METRICS, PARAMETERS, CellTable
+
+__all__ = ["FORMAT", "StudyData", "StudyFileError", "StudyStore", "is_study_file", "read_study"]
+
+FORMAT = "biafc-study"
+FORMAT_VERSION = 1
+
+
+class StudyFileError(ValueError):
+    """A study output that cannot be used (one line: the file and why)."""
+
+
+def _unit(name: str) -> str:
+    if name == "amplitude":
+        return ""
+    if name in PARAMETERS:
+        return PARAMETERS[name].unit
+    base = name.rsplit("_", 1)[0] if name.endswith(("_ltr", "_rtl")) else name
+    if base in METRICS:
+        return METRICS[base][0]
+    if base == "f_edge":
+        return "Hz"
+    return ""
+
+
+def _description(name: str) -> str:
+    base = name.rsplit("_", 1)[0] if name.endswith(("_ltr", "_rtl")) else name
+    if base in METRICS:
+        return METRICS[base][1]
+    return {
+        "f_edge": "the far cylinder's band edge where conversion saturates (Hz)",
+        "error_estimate": "integrator's step-doubling error estimate (relative L2)",
+        "alpha_actual": "the chain's asymmetry factor from its quasi-bands",
+    }.get(base, "")
+
+
+def is_study_file(path: str | Path) -> bool:
+    """Whether ``path`` is an HDF5 study output."""
+    try:
+        with h5py.File(path, "r") as f:
+            return bool(f.attrs.get("format") == FORMAT)
+    except (OSError, ValueError):
+        return False
+
+
+class StudyStore:
+    """The writer of one study output (:meth:`create` or :meth:`open` to resume)."""
+
+    def __init__(self, path: Path, f: h5py.File) -> None:
+        self.path = path
+        self.f = f
+
+    @classmethod
+    def create(
+        cls,
+        path: str | Path,
+        *,
+        name: str,
+        study_yaml: str,
+        digest: str,
+        chain_yaml: str,
+        table: CellTable,
+        directions: Sequence[str],
+        metric_names: Sequence[str],
+        n_tasks: int,
+        spectrum_freq_Hz: NDArray[np.float64] | None = None,
+    ) -> StudyStore:
+        p = Path(path)
+        p.parent.mkdir(parents=True, exist_ok=True)
+        tmp = p.with_name(p.name + ".part")
+        f = h5py.File(tmp, "w")
+        try:
+            f.attrs.update(
+                {
+                    "format": FORMAT,
+                    "format_version": FORMAT_VERSION,
+                    "name": name,
+                    "study_yaml": study_yaml,
+                    "study_digest": digest,
+                    "chain_yaml": chain_yaml,
+                    "n_cells": table.n_cells,
+                    "amplitude_kind": table.amplitude_kind,
+                    "directions": json.dumps(list(directions)),
+                    "status": "running",
+                    "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+                    "software": _software(),
+                }
+            )
+            n = table.n_cells
+            chunk = (min(n, 4096),)
+            g = f.create_group("parameters")
+            for i, pname in enumerate(table.names):
+                ds = g.create_dataset(pname, data=table.values[:, i])
+                unit = ("m" if table.amplitude_kind == "displacement" else "N") if (
+                    pname == "amplitude") else _unit(pname)  # fmt: skip
+                ds.attrs["unit"] = unit
+            g.attrs["order"] = json.dumps(list(table.names))
+            c = f.create_group("cells")
+            c.create_dataset("point", data=table.point)
+            c.create_dataset("status", shape=(n,), dtype="i1", fillvalue=0, chunks=chunk)
+            c.create_dataset("message", shape=(n,), dtype=h5py.string_dtype(), chunks=chunk)
+            m = f.create_group("metrics")
+            for mname in metric_names:
+                ds = m.create_dataset(mname, shape=(n,), dtype="f8", fillvalue=np.nan, chunks=chunk)
+                ds.attrs["unit"] = _unit(mname)
+                ds.attrs["description"] = _description(mname)
+            m.attrs["order"] = json.dumps(list(metric_names))
+            if spectrum_freq_Hz is not None:
+                s = f.create_group("spectra")
+                s.create_dataset("freq_Hz", data=spectrum_freq_Hz).attrs["unit"] = "Hz"
+                for d in directions:
+                    s.create_dataset(
+                        d, shape=(n, spectrum_freq_Hz.size), dtype="f4", fillvalue=np.nan,
+                        chunks=(min(n, 64), spectrum_freq_Hz.size),
+                    ).attrs["unit"] = "m"  # fmt: skip
+            t = f.create_group("tasks")
+            t.create_dataset("wall_s", shape=(n_tasks,), dtype="f8", fillvalue=np.nan)
+            t.create_dataset("worker", shape=(n_tasks,), dtype=h5py.string_dtype())
+            f.flush()
+            f.close()
+        except BaseException:
+            f.close()
+            tmp.unlink(missing_ok=True)
+            raise
+        tmp.replace(p)
+        return cls(p, h5py.File(p, "r+"))
+
+    @classmethod
+    def open(cls, path: str | Path, *, digest: str, table: CellTable) -> StudyStore:
+        """Open an output to continue it; refused (:class:`StudyFileError`) when it is not a
+        study output, was made from another study (digest) or holds other cells."""
+        p = Path(path)
+        try:
+            f = h5py.File(p, "r+")
+        except OSError as exc:
+            raise StudyFileError(f"{p}: cannot open to continue it ({exc})") from None
+        try:
+            if f.attrs.get("format") != FORMAT:
+                raise StudyFileError(f"{p}: not a study output; choose another --out")
+            old = str(f.attrs.get("study_digest", ""))
+            if old != digest:
+                raise StudyFileError(
+                    f"{p}: made from another study (digest {old[:12]}, this one {digest[:12]}); "
+                    "choose another --out"
+                )
+            same = int(f.attrs["n_cells"]) == table.n_cells and all(
+                name in f["parameters"]
+                and np.array_equal(f["parameters"][name][...], table.values[:, i])
+                for i, name in enumerate(table.names)
+            )
+            if not same:
+                raise StudyFileError(
+                    f"{p}: holds other cells than this study's; choose another --out"
+                )
+        except BaseException:
+            f.close()
+            raise
+        f.attrs["status"] = "running"
+        f.flush()
+        return cls(p, f)
+
+    def done(self) -> NDArray[np.bool_]:
+        """``[n_cells]``: cells already run (ok, inaccurate or failed)."""
+        return np.asarray(self.f["cells/status"][...] != 0)
+
+    def write_task(self, task: int, result: Any) -> None:
+        """Write one :class:`analysis.study_cells.TaskResult` (cells sorted), status last."""
+        idx = np.asarray(result.cells, dtype=np.int64)
+        order = np.argsort(idx)
+        idx = idx[order]
+        contiguous = idx.size > 0 and idx[-1] - idx[0] + 1 == idx.size
+        sel: Any = slice(int(idx[0]), int(idx[-1]) + 1) if contiguous else idx
+        for name, arr in result.metrics.items():
+            if name in self.f["metrics"]:
+                self.f["metrics"][name][sel] = np.asarray(arr)[order]
+        for d, arr in result.spectra.items():
+            if "spectra" in self.f and d in self.f["spectra"]:
+                self.f["spectra"][d][sel] = np.asarray(arr)[order]
+        for cell, msg in result.messages.items():
+            self.f["cells/message"][int(cell)] = msg
+        self.f["tasks/wall_s"][task] = result.wall_s
+        self.f["tasks/worker"][task] = result.worker
+        self.f["cells/status"][sel] = np.asarray(result.status)[order]
+        self.f.flush()
+
+    def close(self, status: str) -> None:
+        """Mark the output ``complete``, ``incomplete`` (interrupted) or ``failed``; close."""
+        if not self.f.id.valid:
+            return
+        self.f.attrs["status"] = status
+        self.f.flush()
+        self.f.close()
+
+
+def _software() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return f"biafc-lab {version('biafc-lab')}"
+    except PackageNotFoundError:
+        return "biafc-lab"
+
+
+@dataclass
+class StudyData:
+    """A study output in memory: ``parameters`` name -> [n] (SI), ``units`` name -> unit,
+    ``metrics`` name -> [n], ``status [n]``, ``point [n]``, ``messages``, spectra (direction ->
+    [n, F] with ``spectrum_freq_Hz``) and the root attributes."""
+
+    path: Path
+    attrs: dict[str, Any]
+    parameters: dict[str, NDArray[np.float64]]
+    metrics: dict[str, NDArray[np.float64]]
+    units: dict[str, str]
+    status: NDArray[np.int8]
+    point: NDArray[np.int64]
+    messages: NDArray[Any]
+    spectrum_freq_Hz: NDArray[np.float64] | None
+    spectra: dict[str, NDArray[np.float32]]
+    task_wall_s: NDArray[np.float64]
+
+    @property
+    def directions(self) -> list[str]:
+        return list(json.loads(str(self.attrs.get("directions", "[]"))))
+
+    @property
+    def n_cells(self) -> int:
+        return int(self.status.size)
+
+
+def read_study(path: str | Path, *, spectra: bool = True) -> StudyData:
+    """Read a whole study output (figures, tests). Raises :class:`StudyFileError`."""
+    p = Path(path)
+    try:
+        f = h5py.File(p, "r")
+    except OSError as exc:
+        raise StudyFileError(f"{p}: cannot read ({exc})") from None
+    with f:
+        if f.attrs.get("format") != FORMAT:
+            raise StudyFileError(f"{p}: not a study output")
+        attrs = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in f.attrs.items()}
+        pnames = json.loads(str(f["parameters"].attrs["order"]))
+        mnames = json.loads(str(f["metrics"].attrs["order"]))
+        units = {n: str(f["parameters"][n].attrs.get("unit", "")) for n in pnames}
+        units.update({n: str(f["metrics"][n].attrs.get("unit", "")) for n in mnames})
+        freq = None
+        spec: dict[str, NDArray[np.float32]] = {}
+        if spectra and "spectra" in f:
+            freq = f["spectra/freq_Hz"][...]
+            spec = {d: f["spectra"][d][...] for d in f["spectra"] if d != "freq_Hz"}
+        return StudyData(
+            path=p,
+            attrs=attrs,
+            parameters={n: f["parameters"][n][...] for n in pnames},
+            metrics={n: f["metrics"][n][...] for n in mnames},
+            units=units,
+            status=f["cells/status"][...],
+            point=f["cells/point"][...],
+            messages=f["cells/message"].asstr()[...],
+            spectrum_freq_Hz=freq,
+            spectra=spec,
+            task_wall_s=f["tasks/wall_s"][...],
+        )

@@ -1,0 +1,119 @@
+"""Study files: the cells they make, and bad ones refused in one line before any task."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from daq.cli.biafc import main
+from protocols.study import cell_table, load_study, parse_study
+from protocols.yamlfile import ConfigError
+
+from .conftest import TINY
+
+
+def test_grid_cells_are_every_design_point_at_every_amplitude(tiny_study: Path) -> None:
+    table = cell_table(load_study(tiny_study).study)
+    assert table.names == ("diameter", "preload", "n_cylinders", "amplitude")
+    assert table.n_cells == 3 * 2 * 2
+    np.testing.assert_allclose(np.unique(table.column("diameter")), [12e-3, 13.5e-3, 15e-3])
+    np.testing.assert_allclose(table.values[:2, -1], [0.5e-6, 2e-6])  # amplitude inner
+    assert list(table.point[:4]) == [0, 0, 1, 1]
+
+
+def test_latin_hypercube_is_seeded_and_within_the_ranges() -> None:
+    text = TINY.replace("sampling: grid", "sampling: {latin_hypercube: 20, seed: 3}")
+    text = text.replace("{from: 12 mm, to: 15 mm, count: 3}", "{from: 12 mm, to: 15 mm}")
+    text = text.replace("[3 N, 6 N]", "{from: 3 N, to: 6 N}")
+    a = cell_table(parse_study(text).study)
+    b = cell_table(parse_study(text).study)
+    c = cell_table(parse_study(text.replace("seed: 3", "seed: 4")).study)
+    assert a.n_cells == 40
+    assert np.array_equal(a.values, b.values) and not np.array_equal(a.values, c.values)
+    d = a.column("diameter")
+    assert d.min() >= 12e-3 and d.max() <= 15e-3
+    # one sample per stratum of each range
+    strata = np.floor((np.unique(d) - 12e-3) / 3e-3 * 20).astype(int)
+    assert sorted(strata) == list(range(20))
+
+
+def test_the_digest_follows_what_decides_the_results(tiny_study: Path) -> None:
+    sf = load_study(tiny_study)
+    renamed = parse_study(TINY.replace("name: tiny", "name: other\ndescription: x"))
+    changed = parse_study(TINY.replace("preload: [3 N, 6 N]", "preload: [3 N, 7 N]"))
+    assert sf.digest("c") == renamed.digest("c")
+    assert sf.digest("c") != changed.digest("c")
+    assert sf.digest("c") != sf.digest("another chain")
+
+
+BAD = [
+    (
+        "  diamter: {from: 12 mm, to: 15 mm, count: 3}",
+        4,
+        "parameters.diamter",
+        "did you mean 'diameter'",
+    ),
+    (
+        "  diameter: {from: 12 mm, to: 15 mm, count: 0}",
+        4,
+        "parameters.diameter.count",
+        "empty range",
+    ),
+    ("  diameter: []", 4, "parameters.diameter", "empty range"),
+    ("  diameter: {from: 15 mm, to: 12 mm, count: 3}", 4, "parameters.diameter.to", "empty range"),
+    (
+        "  diameter: {from: 12 N, to: 15 mm, count: 3}",
+        4,
+        "parameters.diameter.from",
+        "not a length unit",
+    ),
+    ("  diameter: {from: 12, to: 15 mm, count: 3}", 4, "parameters.diameter.from", "no unit"),
+]
+
+
+@pytest.mark.parametrize(("line", "lineno", "field", "why"), BAD)
+def test_a_bad_study_is_refused_in_one_line_naming_file_line_and_field(
+    tmp_path: Path, line: str, lineno: int, field: str, why: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    text = TINY.replace("  diameter: {from: 12 mm, to: 15 mm, count: 3}", line)
+    p = tmp_path / "bad.yaml"
+    p.write_text(text)
+    out = tmp_path / "bad.h5"
+    with pytest.raises(ConfigError):
+        load_study(p)
+    assert main(["study", str(p), "--workers", "2", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1, err
+    assert f"{p}:{lineno}: {field}: " in err and why in err, err
+    assert not out.exists()  # refused before any task
+
+
+def test_wrong_amplitude_units_and_unknown_metric_are_refused(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match=r"<study>:9: drive\.amplitudes: .*neither"):
+        parse_study(TINY.replace("[0.5 um, 2 um]", "[0.5 um, 2 V]"))
+    with pytest.raises(ConfigError, match=r"metrics: 'asymetry_ratio'.*did you mean"):
+        parse_study(TINY + "metrics: [asymetry_ratio]\n")
+
+
+def test_a_chain_no_cell_can_have_is_refused_before_any_task(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    chain = tmp_path / "dashpot.yaml"
+    chain.write_text(
+        "n_cylinders: 5\nlength_first: 90 mm\nlength_last: 110 mm\n"
+        "damping: {bending_mode_ratio: 0.002, contact_dashpot_ratio: 0.005}\n"
+    )
+    p = tmp_path / "s.yaml"
+    p.write_text(
+        TINY.replace("sampling: grid", "chain: dashpot.yaml\nsampling: grid").replace(
+            "[3 N, 6 N]", "[0 N, 6 N]"
+        )
+    )
+    out = tmp_path / "s.h5"
+    assert main(["study", str(p), "--workers", "2", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    assert f"{p}:6: parameters.preload: no chain for" in err and "contact_dashpot_ratio" in err
+    assert not out.exists()

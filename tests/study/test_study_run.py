@@ -1,0 +1,159 @@
+"""Running a study: the same numbers serially, on a LocalCluster, after a killed worker and
+after a resume; a cell's numbers do not depend on the cells that share its batch."""
+
+from __future__ import annotations
+
+import os
+import signal
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from analysis.study_cells import (
+    STATUS_OK,
+    StudySetup,
+    run_task,
+    stored_names,
+    task_cells,
+)
+from daq.cli.biafc import main
+from daq.study_runner import dask_client, run_study
+from protocols.study import cell_table, load_study
+from protocols.studyfile import StudyStore, read_study
+from sim_backend.dem.spec import default_chain_spec
+
+
+def _setup(path: Path) -> tuple[Any, Any, Any, str]:
+    sf = load_study(path)
+    table = cell_table(sf.study)
+    base = default_chain_spec()
+    setup = StudySetup(sf.study, base.model_dump_json(), table.names)
+    return sf, table, setup, sf.digest(base.to_yaml())
+
+
+def _store(path: Path, out: Path) -> tuple[Any, Any, Any]:
+    sf, table, setup, digest = _setup(path)
+    n_tasks = len(task_cells(table.n_cells, sf.study.run.cells_per_task))
+    store = StudyStore.create(
+        out, name=sf.study.name, study_yaml=sf.text, digest=digest,
+        chain_yaml=default_chain_spec().to_yaml(), table=table,
+        directions=sf.study.drive.directions, metric_names=stored_names(sf.study),
+        n_tasks=n_tasks,
+    )  # fmt: skip
+    return setup, table, store
+
+
+def _same(a: Path, b: Path) -> None:
+    ra, rb = read_study(a), read_study(b)
+    assert ra.metrics.keys() == rb.metrics.keys()
+    for name in ra.metrics:
+        assert np.array_equal(ra.metrics[name], rb.metrics[name], equal_nan=True), name
+    assert np.array_equal(ra.status, rb.status)
+
+
+@pytest.fixture(scope="module")
+def serial_reference(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    from .conftest import TINY
+
+    d = tmp_path_factory.mktemp("ref")
+    (d / "tiny.yaml").write_text(TINY)
+    out = d / "serial.h5"
+    assert main(["study", str(d / "tiny.yaml"), "--workers", "0", "--out", str(out), "-q"]) == 0
+    data = read_study(out)
+    assert np.all(data.status == STATUS_OK) and data.attrs["status"] == "complete"
+    assert np.all(np.isfinite(data.metrics["asymmetry_ratio"]))
+    assert np.all(data.metrics["error_estimate_ltr"] < 0.5)
+    return out
+
+
+@pytest.fixture(scope="module")
+def client() -> Any:
+    with dask_client(2) as c:
+        yield c
+
+
+def test_a_cell_does_not_depend_on_the_cells_in_its_batch(tiny_study: Path) -> None:
+    _, table, setup, _ = _setup(tiny_study)
+    everything = np.arange(table.n_cells)
+    together = run_task(setup, everything, table.values)
+    for cells in ([5], [7, 2], [11, 0, 6]):
+        idx = np.asarray(cells)
+        alone = run_task(setup, idx, table.values[idx])
+        for name, arr in alone.metrics.items():
+            assert np.array_equal(arr, together.metrics[name][idx], equal_nan=True), name
+
+
+def test_two_worker_processes_give_the_serial_result_bit_for_bit(
+    tiny_study: Path, serial_reference: Path, client: Any, tmp_path: Path
+) -> None:
+    setup, table, store = _store(tiny_study, tmp_path / "dask.h5")
+    summary = run_study(setup, table, store, client=client)
+    workers = set(store.f["tasks/worker"].asstr()[...])
+    store.close("complete")
+    assert summary.cells_run == table.n_cells and summary.engine == "dask (2 workers)"
+    assert len(workers) == 2 and f"{os.uname().nodename}:{os.getpid()}" not in workers
+    _same(serial_reference, tmp_path / "dask.h5")
+
+
+def test_a_killed_worker_loses_only_its_tasks_and_the_study_completes_the_same(
+    tiny_study: Path, serial_reference: Path, client: Any, tmp_path: Path
+) -> None:
+    setup, table, store = _store(tiny_study, tmp_path / "killed.h5")
+    killed: list[int] = []
+
+    def kill_one(i: int, res: Any, n_done: int) -> None:
+        if not killed:
+            pids = client.run(os.getpid)
+            pid = next(p for p in pids.values() if not res.worker.endswith(f":{p}"))
+            os.kill(pid, signal.SIGKILL)
+            killed.append(pid)
+
+    summary = run_study(setup, table, store, client=client, on_task=kill_one)
+    store.close("complete")
+    assert killed and summary.cells_run == table.n_cells
+    _same(serial_reference, tmp_path / "killed.h5")
+    # the nanny brings a worker back for the next test
+    deadline = time.monotonic() + 20
+    while len(client.scheduler_info()["workers"]) < 2 and time.monotonic() < deadline:
+        time.sleep(0.1)
+
+
+def test_resume_skips_done_cells_and_ends_with_the_same_result(
+    tiny_study: Path, serial_reference: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "resumed.h5"
+    setup, table, store = _store(tiny_study, out)
+
+    def stop_after_two(i: int, res: Any, n_done: int) -> None:
+        if n_done >= 6:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        run_study(setup, table, store, on_task=stop_after_two)
+    store.close("incomplete")
+    assert int((read_study(out).status != 0).sum()) == 6
+    ran: list[np.ndarray] = []
+    store = StudyStore.open(out, digest=_setup(tiny_study)[3], table=table)
+    summary = run_study(setup, table, store, on_task=lambda i, r, n: ran.append(r.cells))
+    store.close("complete")
+    assert summary.cells_skipped == 6 and summary.cells_run == 6
+    assert sorted(np.concatenate(ran)) == list(range(6, 12))
+    _same(serial_reference, out)
+    # the command line resumes too: nothing left to run
+    assert main(["study", str(tiny_study), "--workers", "0", "--out", str(out), "-q"]) == 0
+    assert "12 done before" in capsys.readouterr().err
+
+
+def test_an_output_of_another_study_is_not_continued(
+    tiny_study: Path, serial_reference: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    other = tmp_path / "other.yaml"
+    other.write_text(tiny_study.read_text().replace("[3 N, 6 N]", "[3 N, 7 N]"))
+    before = serial_reference.read_bytes()
+    assert main(["study", str(other), "--workers", "0", "--out", str(serial_reference)]) == 2
+    err = capsys.readouterr().err
+    assert "made from another study" in err and len(err.strip().splitlines()) == 1
+    assert serial_reference.read_bytes() == before
