@@ -3,10 +3,17 @@
 Protocol and bench files are validated by pydantic models; when validation fails the error must
 name the file, the line and the field. PyYAML's node tree keeps line marks, so the loader here
 builds plain Python objects *and* a map from each key path to its line.
+
+This is the one loader of the settings files (protocol, bench, chain), and it is bounded: a file
+larger than :data:`MAX_BYTES`, not UTF-8 text, nested deeper than :data:`MAX_DEPTH`, or whose
+aliases would expand to more than :data:`MAX_NODES` values is refused in one line naming the
+file and the bound, in time proportional to its size (a "billion laughs" file is refused while
+it is read, never expanded). Merge keys (``<<``) and keys that are not scalars are refused too.
 """
 
 from __future__ import annotations
 
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -14,8 +21,31 @@ from typing import Any, TypeVar
 
 import yaml
 from pydantic import BaseModel, ValidationError
+from yaml.composer import Composer
+from yaml.constructor import SafeConstructor
+from yaml.events import AliasEvent
+from yaml.resolver import Resolver
 
-__all__ = ["ConfigError", "YamlDoc", "load_yaml", "parse_yaml", "validate"]
+__all__ = [
+    "MAX_BYTES",
+    "MAX_DEPTH",
+    "MAX_NODES",
+    "ConfigError",
+    "YamlDoc",
+    "load_yaml",
+    "parse_yaml",
+    "read_yaml_data",
+    "read_yaml_text",
+    "validate",
+]
+
+#: the largest settings file read (bytes); the shipped ones hold a few kB
+MAX_BYTES = 1 << 20
+#: the deepest nesting of lists and mappings (the shipped files nest 3 deep)
+MAX_DEPTH = 64
+#: the most values (scalars, lists and mappings, aliases expanded) a file may hold
+MAX_NODES = 100_000
+_BOUND_NAME = "a settings file"
 
 M = TypeVar("M", bound=BaseModel)
 Path_ = tuple[str | int, ...]
@@ -27,12 +57,14 @@ class ConfigError(ValueError):
 
 @dataclass
 class YamlDoc:
-    """A loaded YAML document: data, text, source name and key path -> line (1-based)."""
+    """A loaded YAML document: data, text, source name and key path -> line (1-based);
+    ``empty``: the text held no document (``data`` is then ``{}``)."""
 
     data: Any
     text: str
     source: str
     lines: dict[Path_, int] = field(default_factory=dict)
+    empty: bool = False
 
     def line_of(self, path: Sequence[str | int]) -> int:
         """Line of the deepest known prefix of ``path`` (1 when nothing is known)."""
@@ -50,58 +82,191 @@ class YamlDoc:
         return ConfigError(f"{self.source}:{self.line_of(path)}: {where}{message}")
 
 
-def _build(node: yaml.Node, path: Path_, lines: dict[Path_, int]) -> Any:
+class _Refused(Exception):
+    """A bound or rule of this loader broken at ``line`` (1-based)."""
+
+    def __init__(self, line: int, message: str) -> None:
+        super().__init__(message)
+        self.line = line
+
+
+try:  # libyaml's parser when present (fast), PyYAML's own otherwise
+    from yaml.cyaml import CParser as _Parser  # type: ignore[attr-defined]
+
+    def _init_parser(loader: Any, text: str) -> None:
+        _Parser.__init__(loader, text)
+
+except ImportError:  # pragma: no cover - PyYAML without libyaml
+    from yaml.parser import Parser as _Parser  # type: ignore[assignment]
+    from yaml.reader import Reader
+    from yaml.scanner import Scanner
+
+    class _Parser(Reader, Scanner, _Parser):  # type: ignore[no-redef]
+        pass
+
+    def _init_parser(loader: Any, text: str) -> None:
+        Reader.__init__(loader, text)
+        Scanner.__init__(loader)
+        yaml.parser.Parser.__init__(loader)
+
+
+class _BoundedComposer(Composer, _Parser, Resolver):  # type: ignore[misc, valid-type]
+    """PyYAML's composer counting as it goes: nesting depth, and values with every alias
+    counted as the size of what it refers to, so that expansion is bounded before it happens."""
+
+    def __init__(self, text: str) -> None:
+        _init_parser(self, text)
+        Composer.__init__(self)
+        Resolver.__init__(self)
+        self.depth = 0
+        self.count = 0
+        self.sizes: dict[str, int] = {}
+
+    def compose_node(self, parent: Any, index: Any) -> Any:
+        event: Any = self.peek_event()
+        line = event.start_mark.line + 1
+        if isinstance(event, AliasEvent):
+            anchor = str(event.anchor)
+            if anchor in self.anchors and anchor not in self.sizes:
+                raise _Refused(line, f"alias *{anchor} refers to the value that holds it")
+            self.count += self.sizes.get(anchor, 0)
+            if self.count > MAX_NODES:
+                raise _Refused(
+                    line, f"aliases expand to more than {MAX_NODES} values (the bound for "
+                    f"{_BOUND_NAME}; write the values out, or use fewer aliases)"
+                )  # fmt: skip
+            return super().compose_node(parent, index)
+        self.depth += 1
+        self.count += 1
+        if self.depth > MAX_DEPTH:
+            raise _Refused(line, _too_deep())
+        if self.count > MAX_NODES:
+            raise _Refused(line, f"more than {MAX_NODES} values (the bound for {_BOUND_NAME})")
+        before = self.count
+        node = super().compose_node(parent, index)
+        if event.anchor is not None:
+            self.sizes[event.anchor] = self.count - before + 1
+        self.depth -= 1
+        return node
+
+
+def _build(
+    node: yaml.Node, path: Path_, lines: dict[Path_, int], constructor: SafeConstructor
+) -> Any:
     lines[path] = node.start_mark.line + 1
     if isinstance(node, yaml.MappingNode):
         out: dict[Any, Any] = {}
         for key_node, value_node in node.value:
-            key = _build(key_node, (), {})
+            where = key_node.start_mark.line + 1
+            if key_node.tag == "tag:yaml.org,2002:merge":
+                raise _Refused(where, "merge keys (<<) are not supported; write the keys out")
+            if not isinstance(key_node, yaml.ScalarNode):
+                raise _Refused(where, "a key must be a name, not a list or a mapping")
+            key = constructor.construct_object(key_node, deep=True)
             if key in out:
                 raise ConfigError(f"duplicate key {key!r}")
-            lines[(*path, key)] = key_node.start_mark.line + 1
-            out[key] = _build(value_node, (*path, key), lines)
-            lines[(*path, key)] = key_node.start_mark.line + 1  # the key's line, not the value's
+            lines[(*path, key)] = where
+            out[key] = _build(value_node, (*path, key), lines, constructor)
+            lines[(*path, key)] = where  # the key's line, not the value's
         return out
     if isinstance(node, yaml.SequenceNode):
-        return [_build(item, (*path, i), lines) for i, item in enumerate(node.value)]
-    loader = yaml.SafeLoader("")
-    try:
-        return loader.construct_object(node, deep=True)
-    finally:
-        loader.dispose()
+        return [_build(item, (*path, i), lines, constructor) for i, item in enumerate(node.value)]
+    return constructor.construct_object(node, deep=True)
+
+
+def _reader_line(text: str, exc: yaml.YAMLError) -> int:
+    position = getattr(exc, "position", None)
+    return text.count("\n", 0, position) + 1 if isinstance(position, int) else 1
 
 
 def parse_yaml(text: str, source: str = "<string>") -> YamlDoc:
-    """Parse YAML text; a syntax error becomes ``SOURCE:LINE: malformed YAML: ...``."""
+    """Parse YAML text within the bounds of this module; a syntax error becomes
+    ``SOURCE:LINE: malformed YAML: ...``, a broken bound ``SOURCE:LINE: what, the bound``."""
+    size = len(text.encode("utf-8", "surrogatepass"))
+    if size > MAX_BYTES:
+        raise ConfigError(_too_big(source, size))
+    loader = _BoundedComposer(text)
     try:
-        node = yaml.compose(text, Loader=yaml.SafeLoader)
+        node = loader.get_single_node()
+    except _Refused as exc:
+        raise ConfigError(f"{source}:{exc.line}: {exc}") from None
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         line = mark.line + 1 if mark is not None else 1
         problem = (exc.problem or exc.context or "syntax error").strip()
+        if "nesting depth" in problem:  # libyaml's own bound (1000), met while looking ahead
+            raise ConfigError(f"{source}:{line}: {_too_deep()}") from None
         raise ConfigError(f"{source}:{line}: malformed YAML: {problem}") from None
     except yaml.YAMLError as exc:
-        raise ConfigError(f"{source}:1: malformed YAML: {exc}".splitlines()[0]) from None
+        first = str(exc).splitlines()[0]
+        raise ConfigError(f"{source}:{_reader_line(text, exc)}: malformed YAML: {first}") from None
+    finally:
+        loader.dispose()
     lines: dict[Path_, int] = {}
     if node is None:
-        return YamlDoc({}, text, source, {(): 1})
+        return YamlDoc({}, text, source, {(): 1}, empty=True)
     try:
-        data = _build(node, (), lines)
+        data = _build(node, (), lines, SafeConstructor())
+    except _Refused as exc:
+        raise ConfigError(f"{source}:{exc.line}: {exc}") from None
     except ConfigError as exc:
         raise ConfigError(f"{source}:{node.start_mark.line + 1}: {exc}") from None
+    except yaml.MarkedYAMLError as exc:
+        mark = exc.problem_mark or exc.context_mark
+        line = mark.line + 1 if mark is not None else 1
+        problem = (exc.problem or exc.context or "cannot construct").strip().splitlines()[0]
+        raise ConfigError(f"{source}:{line}: malformed YAML: {problem}") from None
     except yaml.YAMLError as exc:
         raise ConfigError(f"{source}:1: malformed YAML: {str(exc).splitlines()[0]}") from None
     return YamlDoc(data, text, source, lines)
 
 
-def load_yaml(path: str | Path) -> YamlDoc:
-    """Read and parse a YAML file; unreadable files raise :class:`ConfigError`."""
+def _too_deep() -> str:
+    return f"lists and mappings nested deeper than {MAX_DEPTH} levels (the bound for {_BOUND_NAME})"
+
+
+def _too_big(source: str, size: int) -> str:
+    return (
+        f"{source}: {size / 2**20:.1f} MiB is larger than {_BOUND_NAME} may be "
+        f"({MAX_BYTES // 2**20} MiB)"
+    )
+
+
+def read_yaml_text(path: str | Path) -> str:
+    """The text of a settings file, read within :data:`MAX_BYTES`; a file that cannot be
+    read, is too large or is not UTF-8 text raises :class:`ConfigError` (one line)."""
     p = Path(path)
     try:
-        text = p.read_text(encoding="utf-8")
+        with p.open("rb") as f:
+            raw = f.read(MAX_BYTES + 1)
+            if len(raw) > MAX_BYTES:
+                size = max(os.fstat(f.fileno()).st_size, len(raw))
+                raise ConfigError(_too_big(str(p), size))
     except OSError as exc:
+        if p.is_dir():
+            raise ConfigError(f"{p}: is a folder, not a file") from None
         raise ConfigError(f"{p}: cannot read ({exc.strerror or exc})") from None
-    return parse_yaml(text, str(p))
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = raw.count(b"\n", 0, exc.start) + 1
+        raise ConfigError(
+            f"{p}:{line}: not a text file: byte 0x{raw[exc.start]:02x} at offset {exc.start} "
+            "is not UTF-8 (a settings file is YAML text)"
+        ) from None
+
+
+def load_yaml(path: str | Path) -> YamlDoc:
+    """Read and parse a YAML file; a file that cannot be read or breaks a bound raises
+    :class:`ConfigError`."""
+    return parse_yaml(read_yaml_text(path), str(Path(path)))
+
+
+def read_yaml_data(path: str | Path) -> Any:
+    """The plain data of a YAML file (None if it holds no document), read and parsed within
+    the bounds."""
+    doc = load_yaml(path)
+    return None if doc.empty else doc.data
 
 
 def validate(doc: YamlDoc, model: type[M], context: dict[str, Any] | None = None) -> M:

@@ -315,15 +315,18 @@ def chain_spec_from_dict(data: Any, source: str = "chain") -> ChainSpec:
 def load_chain_spec(path: str | Path) -> ChainSpec:
     """Read a chain file (YAML). Raises :class:`ChainFileError` (one line: file and field)."""
     p = Path(path)
+    return chain_spec_from_dict(_read_chain_file(p), str(p))
+
+
+def _read_chain_file(p: Path) -> Any:
+    """The data of a chain file, read by the bounded settings-file loader (size, text,
+    nesting, aliases: :mod:`protocols.yamlfile`); its refusals become :class:`ChainFileError`."""
+    from protocols.yamlfile import ConfigError, read_yaml_data
+
     try:
-        text = p.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise ChainFileError(f"{p}: cannot read chain file ({exc.strerror})") from None
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise ChainFileError(f"{p}: not valid YAML ({str(exc).splitlines()[0]})") from None
-    return chain_spec_from_dict(data, str(p))
+        return read_yaml_data(p)
+    except ConfigError as exc:
+        raise ChainFileError(str(exc)) from None
 
 
 def default_chain_path() -> Path:
@@ -341,12 +344,7 @@ _GRADED = ("n_cylinders", "length_first", "length_last")
 
 def _raw_chain_dict(path: str | Path | None) -> tuple[dict[str, Any], str]:
     p = Path(path) if path is not None else default_chain_path()
-    try:
-        data = yaml.safe_load(p.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise ChainFileError(f"{p}: cannot read chain file ({exc.strerror})") from None
-    except yaml.YAMLError as exc:
-        raise ChainFileError(f"{p}: not valid YAML ({str(exc).splitlines()[0]})") from None
+    data = _read_chain_file(p)
     if not isinstance(data, dict):
         raise ChainFileError(f"{p}: expected a mapping of chain settings")
     return data, str(p)

@@ -1,0 +1,207 @@
+"""The bad inputs every command must refuse up front (issue 16): a table of cases.
+
+Each :class:`Case` names the files it writes into a scratch folder, the command line a person
+would type there (``run_protocol ...`` or ``biafc ...``) and fragments of the one line it must
+print on stderr. The runner (``test_cases.py``) asserts for every case: exit 2, exactly one line
+on stderr, no traceback, nothing written, no instrument opened, under 2 s and 500 MB.
+
+A case whose fix has not landed yet carries ``pending`` (the reason): it runs as
+``xfail(strict=True)``, so it turns into a failure to un-mark the day it passes.
+
+docs/reliability.md holds this table with the outcomes (``python -m tests.bad_inputs.doc_table``
+rewrites it; ``test_doc_table.py`` checks it is current).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[2]
+SMOKE = (REPO / "protocols" / "smoke.yaml").read_text(encoding="utf-8")
+SIM_BENCH = (REPO / "protocols" / "benches" / "sim_bench.yaml").read_text(encoding="utf-8")
+
+#: named byte strings the cases may be built from (see ``sources`` in conftest.py):
+#: ``run_file``, a complete run file; ``other_hdf5``, an HDF5 file that is not a run file
+Sources = Mapping[str, bytes]
+Content = str | bytes | Callable[[Sources], bytes]
+
+PENDING_LAYER = "issue 16: validation layer (i16-request)"
+PENDING_BOUNDS = "issue 16: bounded inputs (i16-bounds)"
+
+
+@dataclass(frozen=True)
+class Case:
+    """One bad input: ``name`` (a test id), ``what`` (for the docs table), the ``files`` it
+    writes (name -> text, bytes, or a function of the sources), the command line ``argv``
+    (program first) and the ``expect``\\ ed fragments of the one line on stderr."""
+
+    name: str
+    what: str
+    argv: tuple[str, ...]
+    expect: tuple[str, ...]
+    files: Mapping[str, Content] = field(default_factory=dict)
+    pending: str | None = None
+
+
+def _replace(text: str, old: str, new: str) -> str:
+    if old not in text:
+        raise ValueError(f"{old!r} is not in the template")
+    return text.replace(old, new, 1)
+
+
+def proto(old: str, new: str) -> str:
+    """The smoke protocol with ``old`` replaced by ``new``."""
+    return _replace(SMOKE, old, new)
+
+
+def bench(old: str, new: str) -> str:
+    """The simulated bench with ``old`` replaced by ``new``."""
+    return _replace(SIM_BENCH, old, new)
+
+
+def head(
+    source: str, n: int | None = None, fraction: float | None = None
+) -> Callable[[Sources], bytes]:
+    """The first ``n`` bytes (or ``fraction``) of the source ``source``."""
+
+    def make(sources: Sources) -> bytes:
+        data = sources[source]
+        k = n if n is not None else int(len(data) * (fraction or 0.0))
+        return data[:k]
+
+    return make
+
+
+def source(name: str) -> Callable[[Sources], bytes]:
+    return lambda sources: sources[name]
+
+
+GARBAGE = bytes((i * 151 + 89) % 256 for i in range(4096))  # not UTF-8 from byte 1 on
+DEEP = "a: " + "[" * 5000 + "]" * 5000 + "\n"
+LAUGHS = "a0: &a0 [lol, lol, lol, lol, lol, lol, lol, lol, lol]\n" + "".join(
+    f"a{i}: &a{i} [{', '.join([f'*a{i - 1}'] * 9)}]\n" for i in range(1, 10)
+)
+BIG = SMOKE + ("#" + " padding" * 12 + "\n") * 12_000  # about 1.2 MB of comments
+
+RUN = ("run_protocol", "proto.yaml", "--out", "run.h5")
+RUN_BENCH = ("run_protocol", "proto.yaml", "--bench", "bench.yaml", "--out", "run.h5")
+SIMULATE = ("biafc", "simulate", "--direction", "ltr", "--amplitude", "1 um", "--out", "sim.h5")
+
+
+def _p(name: str, what: str, old: str, new: str, expect: tuple[str, ...], **kw: str) -> Case:
+    return Case(name, what, RUN, expect, {"proto.yaml": proto(old, new)}, **kw)  # type: ignore[arg-type]
+
+
+def _b(name: str, what: str, old: str, new: str, expect: tuple[str, ...], **kw: str) -> Case:
+    files = {"proto.yaml": SMOKE, "bench.yaml": bench(old, new)}
+    return Case(name, what, RUN_BENCH, expect, files, **kw)  # type: ignore[arg-type]
+
+
+CASES: tuple[Case, ...] = (
+    # -- the files themselves: bytes, size, nesting, aliases ---------------------------------
+    Case("protocol_binary", "protocol file of binary garbage", RUN,
+         ("proto.yaml", "not a text file"), {"proto.yaml": GARBAGE}),
+    Case("bench_binary", "bench file of binary garbage", RUN_BENCH,
+         ("bench.yaml", "not a text file"), {"proto.yaml": SMOKE, "bench.yaml": GARBAGE}),
+    Case("protocol_nul", "protocol with a NUL byte", RUN, ("proto.yaml",),
+         {"proto.yaml": SMOKE.replace("name: smoke", "name: sm\x00oke")}),
+    Case("protocol_too_big", "protocol of 1.2 MB (comments)", RUN,
+         ("proto.yaml", "1 MiB"), {"proto.yaml": BIG}),
+    Case("protocol_deep", "protocol nested 5000 deep", RUN,
+         ("proto.yaml", "deeper than"), {"proto.yaml": DEEP}),
+    Case("protocol_laughs", 'protocol "billion laughs" (aliases 9 x 9 ... deep)', RUN,
+         ("proto.yaml", "aliases"), {"proto.yaml": LAUGHS}),
+    Case("protocol_merge", "protocol with a merge key (<<)", RUN, ("proto.yaml", "<<"),
+         {"proto.yaml": "base: &b {name: x}\n<<: *b\n" + SMOKE.split("\n", 2)[2]}),
+    Case("protocol_recursive_alias", "protocol with a self-referencing alias", RUN,
+         ("proto.yaml",), {"proto.yaml": SMOKE + "extra: &x [*x]\n"}),
+    Case("protocol_list_key", "protocol with a list as a key", RUN, ("proto.yaml",),
+         {"proto.yaml": SMOKE + "? [1, 2]\n: x\n"}),
+    Case("protocol_empty", "empty protocol file", RUN, ("proto.yaml",), {"proto.yaml": ""}),
+    Case("protocol_list", "protocol that is a list, not a mapping", RUN,
+         ("proto.yaml", "mapping"), {"proto.yaml": "- 1\n- 2\n"}),
+    Case("protocol_missing", "protocol file that does not exist", ("run_protocol",
+         "nothere.yaml", "--out", "run.h5"), ("nothere",)),
+    Case("chain_binary", "chain file of binary garbage (biafc simulate --chain)",
+         (*SIMULATE, "--chain", "chain.yaml"), ("chain.yaml", "not a text file"),
+         {"chain.yaml": GARBAGE}),
+    Case("chain_deep", "chain file nested 5000 deep", (*SIMULATE, "--chain", "chain.yaml"),
+         ("chain.yaml", "deeper than"), {"chain.yaml": DEEP}),
+    Case("chain_laughs", 'chain file "billion laughs"', (*SIMULATE, "--chain", "chain.yaml"),
+         ("chain.yaml", "aliases"), {"chain.yaml": LAUGHS}),
+    # -- run files: biafc figures, --resume ----------------------------------------------------
+    Case("figures_half", "biafc figures on half a run file",
+         ("biafc", "figures", "cut.h5", "--out", "figs"), ("cut.h5", "truncated"),
+         {"cut.h5": head("run_file", fraction=0.5)}, pending=PENDING_BOUNDS),
+    Case("figures_text", "biafc figures on a text file",
+         ("biafc", "figures", "notes.h5", "--out", "figs"), ("notes.h5", "not an HDF5 file"),
+         {"notes.h5": "a text file\n"}, pending=PENDING_BOUNDS),
+    Case("figures_empty", "biafc figures on an empty file",
+         ("biafc", "figures", "empty.h5", "--out", "figs"), ("empty.h5", "empty file"),
+         {"empty.h5": b""}, pending=PENDING_BOUNDS),
+    Case("figures_folder", "biafc figures on a folder", ("biafc", "figures", "."),
+         ("folder",), pending=PENDING_BOUNDS),
+    Case("figures_other_hdf5", "biafc figures on an HDF5 file that is not a run file",
+         ("biafc", "figures", "other.h5", "--out", "figs"), ("other.h5", "not a biafc run"),
+         {"other.h5": source("other_hdf5")}),
+    Case("resume_text", "--resume of a text file", ("run_protocol", "--resume", "notes.h5"),
+         ("notes.h5", "not an HDF5 file"), {"notes.h5": "a text file\n"}, pending=PENDING_BOUNDS),
+    Case("resume_folder", "--resume .", ("run_protocol", "--resume", "."),
+         ("is a folder", "run file")),
+    Case("resume_complete", "--resume of a complete run file",
+         ("run_protocol", "--resume", "done.h5"), ("done.h5", "complete"),
+         {"done.h5": source("run_file")}),
+    Case("resume_other_hdf5", "--resume of an HDF5 file that is not a run file",
+         ("run_protocol", "--resume", "other.h5"), ("other.h5", "not a biafc run"),
+         {"other.h5": source("other_hdf5")}),
+    # -- biafc simulate -------------------------------------------------------------------------
+    Case("simulate_dt_50us", "biafc simulate --dt '50 us' (unstable)",
+         (*SIMULATE, "--dt", "50 us"), ("--dt", "stability limit"), pending=PENDING_BOUNDS),
+    Case("simulate_dt_1s", "biafc simulate --dt '1 s'", (*SIMULATE, "--dt", "1 s"),
+         ("--dt", "stability limit"), pending=PENDING_BOUNDS),
+    # -- protocol fields (the validation layer) ---------------------------------------------
+    _p("cylinders_empty", "cylinders: []", "cylinders: [1, 8, 16]", "cylinders: []",
+       ("proto.yaml", "cylinders"), pending=PENDING_LAYER),
+    _p("cycles_inf", "burst cycles: .inf", "shape: narrowband", "cycles: .inf",
+       ("proto.yaml", "cycles"), pending=PENDING_LAYER),
+    _p("cycles_tiny", "burst cycles: 1e-9", "shape: narrowband", "cycles: 1e-9",
+       ("proto.yaml", "cycles"), pending=PENDING_LAYER),
+    _p("duration_1h", "acquisition duration: 1 h", "duration: 10 ms", "duration: 1 h",
+       ("proto.yaml", "duration"), pending=PENDING_LAYER),
+    _p("duration_10Ms", "acquisition duration: 10 Ms", "duration: 10 ms", "duration: 10 Ms",
+       ("proto.yaml", "duration"), pending=PENDING_LAYER),
+    _p("above_nyquist", "900 kHz burst recorded at 200 kS/s", "f_center: 8.92 kHz",
+       "f_center: 900 kHz", ("proto.yaml", "Nyquist"), pending=PENDING_LAYER),
+    _p("timeout_1ns", "acquisition timeout: 1 ns", "pre_trigger: 0.5 ms",
+       "pre_trigger: 0.5 ms, timeout: 1 ns", ("proto.yaml", "timeout"), pending=PENDING_LAYER),
+    _p("averages_true", "averages: true", "averages: 2", "averages: true",
+       ("proto.yaml", "averages"), pending=PENDING_LAYER),
+    _p("name_newline", "a line break in the name", "name: smoke", 'name: "a\\nb"',
+       ("proto.yaml", "name")),
+    _p("pattern_attribute", "output pattern with attribute access",
+       'output: "runs/{name}_{timestamp}.h5"', 'output: "{name.__class__}.h5"',
+       ("proto.yaml", "output")),
+    _p("unknown_key", "an unknown key", "settle: 10 ms", "settle: 10 ms\nsetle: 5 ms",
+       ("proto.yaml", "unknown key")),
+    _p("wrong_unit", "settle: 10 kg", "settle: 10 ms", "settle: 10 kg",
+       ("proto.yaml", "settle")),
+    Case("out_proc", "--out /proc/x.h5", ("run_protocol", "proto.yaml", "--out", "/proc/x.h5"),
+         ("/proc/x.h5",), {"proto.yaml": SMOKE}, pending=PENDING_LAYER),
+    # -- bench fields (the validation layer) -------------------------------------------------
+    _b("velocity_range_0", "daq velocity_range: 0 V", "velocity_range: 10 V",
+       "velocity_range: 0 V", ("bench.yaml", "velocity_range"), pending=PENDING_LAYER),
+    _b("sample_rate_0", "generator sample_rate: 0", "sample_rate: 1 MSa/s", "sample_rate: 0",
+       ("bench.yaml", "sample_rate")),
+    _b("piezo_stroke_0", "piezo_stroke: 0 um/V", "piezo_stroke: 0.05 um/V",
+       "piezo_stroke: 0 um/V", ("bench.yaml", "piezo_stroke"), pending=PENDING_LAYER),
+    _b("piezo_stroke_negative", "piezo_stroke: -0.05 um/V", "piezo_stroke: 0.05 um/V",
+       "piezo_stroke: -0.05 um/V", ("bench.yaml", "piezo_stroke"), pending=PENDING_LAYER),
+    _b("max_amplitude_negative", "generator max_amplitude: -10 Vpp", "max_amplitude: 10 Vpp",
+       "max_amplitude: -10 Vpp", ("bench.yaml", "max_amplitude"), pending=PENDING_LAYER),
+    _b("stage_speed_0", "stage speed: 0 mm/s", "speed: 25 mm/s", "speed: 0 mm/s",
+       ("bench.yaml", "speed"), pending=PENDING_LAYER),
+    _b("vibrometer_range", "vibrometer range VD-09 5000mm/s/V", "range: VD-09 50mm/s/V",
+       "range: VD-09 5000mm/s/V", ("bench.yaml", "range"), pending=PENDING_LAYER),
+)  # fmt: skip
