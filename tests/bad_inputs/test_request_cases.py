@@ -236,3 +236,48 @@ def test_out_in_proc_is_refused_up_front(tmp_path: Path, refused) -> None:
 def test_out_under_proc_in_a_new_folder_is_refused(tmp_path: Path, refused) -> None:
     line = refused([str(_protocol(tmp_path)), "--out", "/proc/runs/x.h5"])
     assert line.startswith("--out: cannot write in /proc")
+
+
+# -- Ctrl-C before the program has started -------------------------------------------------
+def _python(code: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=False
+    )
+
+
+def test_ctrl_c_while_the_program_is_still_importing_is_one_line_and_130() -> None:
+    """The console script imports daq.cli.entry first: a SIGINT while the rest is imported
+    (before run_protocol.main installs its handling) is one line and exit 130."""
+    proc = _python(
+        "import os, signal, time\n"
+        "import daq.cli.entry\n"
+        "os.kill(os.getpid(), signal.SIGINT)\n"
+        "time.sleep(10)\n"
+    )
+    assert proc.returncode == 130, proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert proc.stderr.strip() == (
+        "run_protocol: interrupted by SIGINT before the run started: nothing was switched on, "
+        "no file written"
+    )
+
+
+def test_ctrl_c_after_the_run_ended_keeps_its_exit_status() -> None:
+    proc = _python(
+        "import os, signal, sys, time\n"
+        "import daq.cli.entry as entry, daq.cli.run_protocol as rp\n"
+        "rp.main = lambda: 0\n"
+        "code = entry.run_protocol()\n"
+        "os.kill(os.getpid(), signal.SIGINT)\n"
+        "time.sleep(0.2)\n"
+        "sys.exit(code)\n"
+    )
+    assert proc.returncode == 0 and "Traceback" not in proc.stderr, proc.stderr
+
+
+def test_the_run_protocol_console_script_goes_through_the_quiet_entry() -> None:
+    import tomllib
+
+    root = Path(__file__).resolve().parents[2]
+    scripts = tomllib.loads((root / "pyproject.toml").read_text())["project"]["scripts"]
+    assert scripts["run_protocol"] == "daq.cli.entry:run_protocol"

@@ -1,0 +1,49 @@
+"""Console-script entry points that are quiet about Ctrl-C from their first instruction.
+
+``run_protocol`` (the console script) imports this module first: a SIGINT/SIGTERM while the
+interpreter is still importing the program (before ``run_protocol.main`` installs its own
+handling) ends it with one line and exit status 130 (143 for SIGTERM), not a
+``KeyboardInterrupt`` traceback. Nothing has been opened or written at that point. Only console
+scripts import this module: importing it installs the handler (its one job).
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+from types import FrameType
+
+__all__ = ["run_protocol"]
+
+_PROG = "run_protocol"
+
+
+def _before_start(signum: int, frame: FrameType | None) -> None:
+    name = signal.Signals(signum).name
+    os.write(
+        2,
+        f"{_PROG}: interrupted by {name} before the run started: nothing was switched on, "
+        "no file written\n".encode(),
+    )
+    os._exit(130 if signum == signal.SIGINT else 128 + signum)
+
+
+for _sig in (signal.SIGINT, signal.SIGTERM):
+    signal.signal(_sig, _before_start)
+
+
+def run_protocol() -> int:
+    """``run_protocol``: :func:`daq.cli.run_protocol.main` (which handles Ctrl-C itself from
+    its first line); once it has returned, a late Ctrl-C no longer changes the exit status."""
+    from daq.cli.run_protocol import main
+
+    try:
+        return main()
+    finally:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)  # the outcome is decided: keep its status
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+
+
+if __name__ == "__main__":
+    sys.exit(run_protocol())
