@@ -1,8 +1,17 @@
-"""``biafc figures``: the paper's figures and a summary from a run file, or the alpha sweep.
+"""``biafc figures``: the paper's figures and a summary from a run file, the figures of a design
+study, or the alpha sweep.
 
     biafc figures RUN.h5 [--out DIR]
+    biafc figures STUDY.h5 [--x diameter --y preload] [--metric asymmetry_ratio]
+                  [--fix amplitude=2um] [--reduce mean|median|max|min]
+                  [--target asymmetry_ratio | min:error_estimate_ltr] [--top 10] [--out DIR]
     biafc figures --alpha-sweep [--alphas 0.1,0.2] [--amplitude 2um] [--duration 8ms]
                   [--cycles 10] [--out DIR]
+
+A study output (``biafc study``) gives a phase diagram per metric (``map_<metric>``: the metric
+over two parameters, the others fixed with ``--fix`` or marginalised with ``--reduce``), the
+paper's Fig. 4 (``alpha_sweep``) for a study over ``alpha`` that recorded its spectra, and the
+ranked table of the best designs for ``--target`` (``best_designs.txt``).
 
 Writes PNG and PDF figures and ``summary.json`` into DIR (default: ``<RUN>_figures`` beside the
 run file, or ``alpha_sweep_figures`` for the sweep) and prints the summary.
@@ -42,6 +51,26 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--cycles", type=float, default=None, help="burst length in cycles for --alpha-sweep"
     )
+    study = parser.add_argument_group("design studies (a biafc study output)")
+    study.add_argument("--x", default=None, help="parameter along x (default: the first varied)")
+    study.add_argument("--y", default=None, help="parameter along y (default: the second)")
+    study.add_argument(
+        "--metric", action="append", default=None, help="metric to map (repeatable; default all)"
+    )
+    study.add_argument(
+        "--fix",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="hold a parameter at a value, with its unit (amplitude=2um, preload=5N)",
+    )
+    study.add_argument(
+        "--reduce", default="mean", help="over the other parameters: mean, median, max, min"
+    )
+    study.add_argument(
+        "--target", default=None, help="metric to rank designs by (min:NAME for the smallest)"
+    )
+    study.add_argument("--top", type=int, default=10, help="designs in the ranked table")
 
 
 def _alpha_sweep(args: argparse.Namespace) -> int:
@@ -96,10 +125,19 @@ def run(args: argparse.Namespace) -> int:
     for name in ("alphas", "amplitude", "duration", "cycles"):
         if getattr(args, name) is not None:
             raise CliError(f"--{name} applies only with --alpha-sweep")
+    path: Path = args.run_file
+    from protocols.studyfile import is_study_file
+
+    if is_study_file(path):
+        return _study_figures(args, path)
+    for name in ("x", "y", "metric", "target"):
+        if getattr(args, name) is not None:
+            raise CliError(f"--{name} applies only to a study output")
+    if args.fix:
+        raise CliError("--fix applies only to a study output")
     from analysis.report import write_figures
     from daq.cli.run_input import read_run_file
 
-    path: Path = args.run_file
     data = read_run_file(path)
     out = args.out or path.with_name(f"{path.stem}_figures")
     try:
@@ -112,4 +150,89 @@ def run(args: argparse.Namespace) -> int:
     for name, why in report.skipped.items():
         print(f"skipped {name}: {why}")
     print(f"written {report.summary_path}")
+    return 0
+
+
+def _parse_fix(items: list[str], amplitude_kind: str) -> dict[str, float]:
+    from instruments.units import UnitError, parse_quantity
+    from protocols.study import PARAMETERS
+
+    out: dict[str, float] = {}
+    for item in items:
+        name, sep, text = item.partition("=")
+        name = name.strip()
+        if not sep or not name or not text.strip():
+            raise CliError(f"--fix {item!r}: write NAME=VALUE, e.g. amplitude=2um")
+        if name == "amplitude":
+            dim = "length" if amplitude_kind == "displacement" else "force"
+        elif name in PARAMETERS:
+            dim = PARAMETERS[name].dimension
+        else:
+            raise CliError(f"--fix {name}: not a study parameter")
+        try:
+            out[name] = (
+                float(text) if dim == "dimensionless" else parse_quantity(text, dim, field=name)
+            )
+        except (UnitError, ValueError) as exc:
+            raise CliError(f"--fix {item!r}: {exc}") from None
+    return out
+
+
+def _study_figures(args: argparse.Namespace, path: Path) -> int:
+    from analysis.plots.study_plot import plot_phase_map
+    from analysis.plots.style import save_figure
+    from analysis.study_maps import (
+        alpha_sweep_from_study,
+        format_ranking,
+        phase_map,
+        rank_designs,
+        varying_parameters,
+    )
+    from protocols.studyfile import StudyFileError, read_study
+
+    try:
+        data = read_study(path)
+    except StudyFileError as exc:
+        raise CliError(str(exc)) from None
+    out = args.out or path.with_name(f"{path.stem}_figures")
+    fixed = _parse_fix(args.fix, str(data.attrs.get("amplitude_kind", "displacement")))
+    done = int((data.status != 0).sum())
+    print(f"{path}: study {data.attrs.get('name')}, {done} of {data.n_cells} cells run "
+          f"({data.attrs.get('status')})")  # fmt: skip
+    hidden = ("f_edge_", "alpha_actual")
+    metrics = args.metric or [m for m in data.metrics if not m.startswith(hidden)]
+    written: list[Path] = []
+    vary = [v for v in varying_parameters(data) if v not in fixed]
+    if len(vary) >= 2 or (args.x and args.y):
+        for metric in metrics:
+            try:
+                pm = phase_map(data, metric, args.x, args.y, fixed=fixed, reduce=args.reduce)
+            except ValueError as exc:
+                raise CliError(str(exc)) from None
+            written += save_figure(plot_phase_map(pm, data.units), out, f"map_{metric}")
+    else:
+        print(f"skipped phase diagrams: they need two varied parameters (varied: {vary})")
+    if "alpha" in vary:
+        from analysis.alpha_sweep import format_alpha_sweep, write_alpha_sweep
+
+        try:
+            sweep = alpha_sweep_from_study(data, fixed=fixed)
+        except ValueError as exc:
+            print(f"skipped alpha_sweep (Fig. 4): {exc}")
+        else:
+            print(format_alpha_sweep(sweep))
+            written += write_alpha_sweep(sweep, out)
+    target = args.target or ("asymmetry_ratio" if "asymmetry_ratio" in data.metrics else metrics[0])
+    try:
+        rows = rank_designs(data, target, top=args.top, fixed=fixed)
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+    table = format_ranking(rows, data, target)
+    print(table)
+    out.mkdir(parents=True, exist_ok=True)
+    ranking = out / "best_designs.txt"
+    ranking.write_text(table + "\n")
+    written.append(ranking)
+    for p in written:
+        print(f"written {p}")
     return 0

@@ -13,7 +13,6 @@ import numpy as np
 import pytest
 
 from analysis.study_cells import (
-    STATUS_OK,
     StudySetup,
     run_task,
     stored_names,
@@ -52,21 +51,6 @@ def _same(a: Path, b: Path) -> None:
     for name in ra.metrics:
         assert np.array_equal(ra.metrics[name], rb.metrics[name], equal_nan=True), name
     assert np.array_equal(ra.status, rb.status)
-
-
-@pytest.fixture(scope="module")
-def serial_reference(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    from .conftest import TINY
-
-    d = tmp_path_factory.mktemp("ref")
-    (d / "tiny.yaml").write_text(TINY)
-    out = d / "serial.h5"
-    assert main(["study", str(d / "tiny.yaml"), "--workers", "0", "--out", str(out), "-q"]) == 0
-    data = read_study(out)
-    assert np.all(data.status == STATUS_OK) and data.attrs["status"] == "complete"
-    assert np.all(np.isfinite(data.metrics["asymmetry_ratio"]))
-    assert np.all(data.metrics["error_estimate_ltr"] < 0.5)
-    return out
 
 
 @pytest.fixture(scope="module")

@@ -1,0 +1,81 @@
+"""Study figures: phase diagrams, the ranked table, Fig. 4 from a study over alpha."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from analysis.study_maps import alpha_sweep_from_study, phase_map, rank_designs
+from daq.cli.biafc import main
+from protocols.studyfile import read_study
+
+from .conftest import TINY
+
+
+def test_a_phase_map_holds_each_cells_metric_at_the_fixed_values(serial_reference: Path) -> None:
+    data = read_study(serial_reference)
+    pm = phase_map(data, "asymmetry_ratio", "diameter", "preload", fixed={"amplitude": 2.1e-6})
+    assert pm.fixed == {"amplitude": 2e-6} and pm.reduced == [] and pm.values.shape == (2, 3)
+    for iy, f0 in enumerate(pm.y):
+        for ix, d in enumerate(pm.x):
+            cell = (
+                (data.parameters["diameter"] == d)
+                & (data.parameters["preload"] == f0)
+                & (data.parameters["amplitude"] == 2e-6)
+            )
+            assert pm.values[iy, ix] == data.metrics["asymmetry_ratio"][cell][0]
+    top = phase_map(data, "asymmetry_ratio", "diameter", "preload", reduce="max")
+    assert top.reduced == ["amplitude"]
+    assert np.all(top.values >= pm.values)
+    with pytest.raises(ValueError, match="diamter"):
+        phase_map(data, "asymmetry_ratio", "diamter", "preload")
+
+
+def test_the_ranking_sorts_cells_by_the_target(serial_reference: Path) -> None:
+    data = read_study(serial_reference)
+    rows = rank_designs(data, "asymmetry_ratio", top=4)
+    vals = [r["asymmetry_ratio"] for r in rows]
+    assert vals == sorted(vals, reverse=True) and vals[0] == np.nanmax(
+        data.metrics["asymmetry_ratio"]
+    )
+    low = rank_designs(data, "min:transmission_ltr", top=1)[0]
+    assert low["transmission_ltr"] == np.nanmin(data.metrics["transmission_ltr"])
+    assert set(rows[0]) >= {"rank", "cell", "diameter", "preload", "amplitude"}
+
+
+def test_biafc_figures_draws_a_study(
+    serial_reference: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    src = tmp_path / "s.h5"
+    shutil.copy(serial_reference, src)
+    out = tmp_path / "figs"
+    argv = ["figures", str(src), "--fix", "amplitude=2um", "--metric", "asymmetry_ratio",
+            "--metric", "efficiency_rtl", "--out", str(out)]  # fmt: skip
+    assert main(argv) == 0
+    text = capsys.readouterr().out
+    assert "best designs for largest asymmetry_ratio" in text
+    for name in ("map_asymmetry_ratio.png", "map_efficiency_rtl.pdf", "best_designs.txt"):
+        assert (out / name).stat().st_size > 0
+    assert main(["figures", str(src), "--fix", "amplitude=2V", "--out", str(out)]) == 2
+
+
+def test_fig4_from_a_study_over_alpha(tmp_path: Path) -> None:
+    text = TINY.replace(
+        "  diameter: {from: 12 mm, to: 15 mm, count: 3}\n  preload: [3 N, 6 N]\n",
+        "  alpha: [0.05, 0.15]\n",
+    ).replace("amplitudes: [0.5 um, 2 um]", "amplitudes: [2 um]")
+    study = tmp_path / "alpha.yaml"
+    study.write_text(text + "record_spectra: true\n")
+    out = tmp_path / "alpha.h5"
+    assert main(["study", str(study), "--workers", "0", "--out", str(out), "-q"]) == 0
+    data = read_study(out)
+    sweep = alpha_sweep_from_study(data)
+    assert list(sweep.alphas) == [0.05, 0.15]
+    np.testing.assert_allclose(sweep.alpha_actual, [0.05, 0.15], rtol=0.02)
+    assert sweep.magnitude["ltr"].shape == (2, data.spectrum_freq_Hz.size)
+    assert np.all(np.isfinite(sweep.output_Hz["rtl"]))
+    assert main(["figures", str(out), "--out", str(tmp_path / "f")]) == 0
+    assert (tmp_path / "f" / "alpha_sweep.png").exists()
