@@ -29,10 +29,13 @@ from instruments.interfaces import Transport
 
 __all__ = [
     "DEFAULT_COMMANDS",
+    "VELOCITY_RANGES",
     "PolytecSettings",
     "PolytecVibrometer",
     "parse_sensitivity",
     "parse_si_value",
+    "range_max_frequency_Hz",
+    "velocity_range_error",
 ]
 
 #: The RS-232 command table: key -> command (``{value}`` where a value is sent). Entries
@@ -63,6 +66,60 @@ _PREFIX = {"": 1.0, "k": 1e3, "M": 1e6, "m": 1e-3, "u": 1e-6, "µ": 1e-6, "n": 1
 _SENS_RE = re.compile(r"([0-9]*\.?[0-9]+(?:[eE][+-]?\d+)?)\s*(mm|um|µm|nm|m)\s*/\s*s\s*/\s*V")
 _DECODER_RE = re.compile(r"^([A-Za-z]{2}-\d+\w*)\s+(.+)$")
 _LEN = {"m": 1.0, "mm": 1e-3, "um": 1e-6, "µm": 1e-6, "nm": 1e-9}
+
+
+#: The velocity decoders known on the OFV-5000 (with the OFV-534 head): decoder -> its ranges
+#: (sensitivity, mm/s/V) -> the range's upper frequency (Hz), per the VD-09 specification of the
+#: OFV-5000 user manual. A range not listed here is refused before anything is connected.
+VELOCITY_RANGES: dict[str, dict[float, float]] = {
+    "VD-09": {1: 100e3, 2: 250e3, 5: 500e3, 10: 1.5e6, 20: 1.5e6, 50: 2.5e6, 100: 2.5e6},
+}
+
+
+def _range_parts(range_name: str) -> tuple[str, float] | None:
+    """``"VD-09 50mm/s/V"`` -> ``("VD-09", 50.0)`` (mm/s/V); ``None`` when unreadable."""
+    m = _DECODER_RE.match(range_name.strip())
+    if m is None:
+        return None
+    try:
+        return m.group(1), parse_sensitivity(m.group(2)) * 1e3
+    except ReplyError:
+        return None
+
+
+def _allowed_text() -> str:
+    return "; ".join(
+        f"{d}: " + ", ".join(f"{r:g}" for r in sorted(table)) + " mm/s/V"
+        for d, table in VELOCITY_RANGES.items()
+    )
+
+
+def velocity_range_error(range_name: str) -> str | None:
+    """Why ``range_name`` (``"VD-09 50mm/s/V"``) is not a range of a known decoder, or
+    ``None``; the message lists the ranges there are."""
+    parts = _range_parts(range_name)
+    if parts is None:
+        return (
+            f"{range_name!r} is not '<decoder> <range>' (e.g. 'VD-09 50mm/s/V'); "
+            f"ranges: {_allowed_text()}"
+        )
+    decoder, mm_s_V = parts
+    table = VELOCITY_RANGES.get(decoder)
+    if table is None:
+        return f"decoder {decoder!r} is not one this software knows ({_allowed_text()})"
+    if not any(math.isclose(mm_s_V, r, rel_tol=1e-9) for r in table):
+        shown = ", ".join(f"{r:g}" for r in sorted(table))
+        return f"{range_name!r} is not a range of the {decoder}; its ranges: {shown} mm/s/V"
+    return None
+
+
+def range_max_frequency_Hz(range_name: str) -> float | None:
+    """The upper frequency (Hz) of a known decoder range, or ``None``."""
+    parts = _range_parts(range_name)
+    if parts is None:
+        return None
+    table = VELOCITY_RANGES.get(parts[0], {})
+    return next((f for r, f in table.items() if math.isclose(parts[1], r, rel_tol=1e-9)), None)
 
 
 def parse_sensitivity(range_name: str) -> float:

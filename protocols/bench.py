@@ -17,7 +17,15 @@ import numpy as np
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from instruments.units import Duration, Length, SampleRate, UnitError, Velocity, Voltage
+from instruments.units import (
+    Duration,
+    Length,
+    SampleRate,
+    UnitError,
+    Velocity,
+    Voltage,
+    format_quantity,
+)
 from instruments.units import parse_quantity as _pq
 from protocols.yamlfile import YamlDoc, load_yaml, parse_yaml, validate
 
@@ -39,12 +47,49 @@ def _per_volt(value: Any, dimension: str) -> float:
 SERIAL_BAUD_DEFAULT = 115200
 
 
+def _in_range(
+    value: float, low: float, high: float, dimension: str, low_open: bool = True, suffix: str = ""
+) -> float:
+    """``value`` if ``low < value <= high`` (``low <= value`` when not ``low_open``), else a
+    ``ValueError`` naming the value and the range (the bench file's field and line are added
+    by the loader)."""
+    ok = math.isfinite(value) and (value > low if low_open else value >= low) and value <= high
+    if ok:
+        return value
+
+    def show(x: float) -> str:
+        return (format_quantity(x, dimension) if dimension else f"{x:g}") + suffix
+
+    above = "above" if low_open else "at least"
+    raise ValueError(
+        f"{show(value)} is not allowed: give a value {above} {show(low)}, up to {show(high)}"
+    )
+
+
 class GeneratorSpec(_Model):
+    """The generator: ``max_amplitude`` (Vpp at its output, at most the 33500B's 20 Vpp into
+    high Z), ``sample_rate`` of its arbitrary waveforms (S/s, up to 1 GSa/s)."""
+
     resource: str
     max_amplitude: Voltage = 10.0  # Vpp at the output
     sample_rate: SampleRate = 1.0e6
     timeout: Duration = 5.0
     baud_rate: int | None = Field(default=None, gt=0)  # only for a serial (ASRL) resource
+
+    @field_validator("max_amplitude")
+    @classmethod
+    def _max_amplitude(cls, v: float) -> float:
+        return _in_range(v, 0.0, 20.0, "voltage", suffix="pp")
+
+    @field_validator("sample_rate")
+    @classmethod
+    def _sample_rate(cls, v: float) -> float:
+        return _in_range(v, 0.0, 1e9, "sample_rate")
+
+    @field_validator("timeout")
+    @classmethod
+    def _timeout(cls, v: float) -> float:
+        return _in_range(v, 0.0, 600.0, "time")
 
 
 class AmplifierSpec(_Model):
@@ -59,12 +104,30 @@ class AmplifierSpec(_Model):
     @field_validator("piezo_stroke", mode="before")
     @classmethod
     def _stroke(cls, v: Any) -> float:
-        return _per_volt(v, "length")
+        stroke = _per_volt(v, "length")
+        if not (math.isfinite(stroke) and 0 < stroke <= 1e-3):
+            raise ValueError(f"{v!r} is not allowed: give a stroke above 0 um/V, up to 1 mm/V")
+        return stroke
 
     @field_validator("force_per_volt", mode="before")
     @classmethod
     def _force(cls, v: Any) -> float | None:
-        return None if v is None else _per_volt(v, "force")
+        if v is None:
+            return None
+        force = _per_volt(v, "force")
+        if not (math.isfinite(force) and 0 < force <= 1e6):
+            raise ValueError(f"{v!r} is not allowed: give a force above 0 N/V, up to 1 MN/V")
+        return force
+
+    @field_validator("gain")
+    @classmethod
+    def _gain(cls, v: float) -> float:
+        return _in_range(v, 0.0, 1e4, "")
+
+    @field_validator("piezo_max")
+    @classmethod
+    def _piezo_max(cls, v: float) -> float:
+        return _in_range(v, 0.0, 10e3, "voltage")
 
 
 class VibrometerSpec(_Model):
@@ -75,6 +138,16 @@ class VibrometerSpec(_Model):
     baud_rate: int = Field(default=SERIAL_BAUD_DEFAULT, gt=0)
     #: RS-232 command table entries that differ on this controller (see instruments.polytec)
     commands: dict[str, str | None] = Field(default_factory=dict)
+
+    @field_validator("range")
+    @classmethod
+    def _known_range(cls, v: str) -> str:
+        from instruments.polytec import velocity_range_error
+
+        why = velocity_range_error(v)
+        if why is not None:
+            raise ValueError(why)
+        return v
 
 
 class StageSpec(_Model):
@@ -92,6 +165,21 @@ class StageSpec(_Model):
     settle: Duration = 0.2  # wait after each move (the simulated stage settles as long)
     timeout: Duration = 60.0
     baud_rate: int = Field(default=SERIAL_BAUD_DEFAULT, gt=0)
+
+    @field_validator("speed")
+    @classmethod
+    def _speed(cls, v: float) -> float:
+        return _in_range(v, 0.0, 1.0, "velocity")
+
+    @field_validator("settle")
+    @classmethod
+    def _settle(cls, v: float) -> float:
+        return _in_range(v, 0.0, 60.0, "time", low_open=False)
+
+    @field_validator("timeout")
+    @classmethod
+    def _timeout(cls, v: float) -> float:
+        return _in_range(v, 0.0, 3600.0, "time")
 
     @model_validator(mode="after")
     def _order(self) -> StageSpec:
@@ -122,11 +210,28 @@ class DaqSpec(_Model):
     velocity_range: Voltage = 10.0
     reference_range: Voltage = 10.0
 
+    @field_validator("max_rate")
+    @classmethod
+    def _max_rate(cls, v: float) -> float:
+        return _in_range(v, 0.0, 100e6, "sample_rate")
+
+    @field_validator("velocity_range", "reference_range")
+    @classmethod
+    def _input_range(cls, v: float) -> float:
+        return _in_range(v, 0.0, 100.0, "voltage")
+
 
 class PositionGrid(_Model):
     first: Length
     pitch: Length
-    count: int = Field(ge=1)
+    count: int = Field(ge=1, le=1000, strict=True)
+
+    @field_validator("pitch")
+    @classmethod
+    def _pitch(cls, v: float) -> float:
+        if v == 0:
+            raise ValueError("0 m puts every cylinder at one place; give the spacing")
+        return v
 
 
 class SimulationSpec(_Model):
@@ -161,6 +266,20 @@ class BenchSpec(_Model):
     daq: DaqSpec = Field(default_factory=DaqSpec)
     cylinder_positions: list[Length] | PositionGrid
     simulation: SimulationSpec | None = None
+
+    @field_validator("name")
+    @classmethod
+    def _one_line_name(cls, v: str) -> str:
+        if not v.strip() or len(v) > 200 or any(ord(c) < 32 or ord(c) == 127 for c in v):
+            raise ValueError(f"{v[:60]!r}: one line of up to 200 characters, no control characters")
+        return v
+
+    @field_validator("cylinder_positions")
+    @classmethod
+    def _some_positions(cls, v: Any) -> Any:
+        if isinstance(v, list) and not 1 <= len(v) <= 1000:
+            raise ValueError(f"{len(v)} positions; give 1 to 1000")
+        return v
 
     @model_validator(mode="after")
     def _check(self) -> BenchSpec:

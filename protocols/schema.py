@@ -7,7 +7,8 @@ A protocol file (YAML) looks like::
     burst:
       ltr: {f_center: 8.92 kHz, shape: narrowband}   # or cycles: 21, width: 0.39 ms (sigma
       rtl: {f_center: 6.63 kHz, sigma_f: 0.3 kHz}     # in time), sigma_f (sigma in frequency)
-    amplitudes: [2 Vpp, 5 Vpp]        # generator Vpp, or actuator displacement (um, m); or
+    amplitudes: [2 Vpp, 5 Vpp]        # generator volts peak-to-peak (Vpp) or peak (Vpk; a bare
+                                      # V is refused), or peak actuator displacement (um, m); or
                                       # {start: 0.1 Vpp, stop: 10 Vpp, count: 6, spacing: log}
     cylinders: all                    # or [1, 5, 16, 31]
     averages: 4
@@ -18,7 +19,10 @@ A protocol file (YAML) looks like::
     on_point_failure: continue        # or stop
     retries: 2
 
-Load with :func:`load_protocol`; every error is one line ``FILE:LINE: field: message``.
+Load with :func:`load_protocol`; every error is one line ``FILE:LINE: field: message``. Every
+number is bounded (:data:`BOUNDS`: durations, rates, cycles; counts and cylinders by their
+validators); the checks against a bench (limits, Nyquist, the record, memory) are in
+:func:`daq.engine.make_plan`, run through :func:`daq.request.validate_request`.
 """
 
 from __future__ import annotations
@@ -28,21 +32,30 @@ import re
 import string
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from instruments.units import Duration, Frequency, SampleRate, UnitError, parse_quantity
+from instruments.units import (
+    Duration,
+    Frequency,
+    SampleRate,
+    UnitError,
+    format_quantity,
+    parse_quantity,
+)
 from protocols.yamlfile import ConfigError, YamlDoc, load_yaml, parse_yaml, validate
 
 __all__ = [
+    "BOUNDS",
     "AcquisitionSpec",
     "AmplitudeRange",
     "BurstSpec",
     "Protocol",
     "ProtocolFile",
+    "amplitude_notation",
     "load_protocol",
     "parse_protocol",
     "resolve_protocol_path",
@@ -61,22 +74,95 @@ class _Model(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
 
+#: a generator amplitude: number, optional prefix, V, then pp (peak-to-peak) or pk (peak)
+_VOLTS = re.compile(
+    r"^\s*(?P<number>[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*(?P<prefix>[pnuµμmk]?)V"
+    r"\s*(?P<kind>pp|p-p|pk|peak)?\s*$"
+)
+
+
+def amplitude_notation(value: Any) -> Literal["Vpp", "Vpk", "m"]:
+    """How an amplitude was written: generator volts peak-to-peak (``"2 Vpp"``), peak
+    (``"1 Vpk"``, ``"1 V peak"``), or a peak actuator displacement (``"1.5 um"``)."""
+    m = _VOLTS.match(value) if isinstance(value, str) else None
+    if m is None:
+        return "m"
+    return "Vpp" if m.group("kind") in ("pp", "p-p") else "Vpk"
+
+
 def parse_amplitude(value: Any) -> tuple[AmplitudeKind, float]:
-    """``"2 Vpp"`` -> ``("generator_Vpp", 2.0)``; ``"1.5 um"`` -> ``("displacement_m", 1.5e-6)``."""
+    """``"2 Vpp"`` -> ``("generator_Vpp", 2.0)``; ``"1 Vpk"`` (or ``"1 V peak"``) ->
+    ``("generator_Vpp", 2.0)``; ``"1.5 um"`` (peak displacement) -> ``("displacement_m",
+    1.5e-6)``. A bare ``"1 V"`` is refused: it says neither peak nor peak-to-peak."""
     kind: AmplitudeKind
-    try:
-        v, kind = parse_quantity(value, "voltage"), "generator_Vpp"
-    except UnitError:
+    m = _VOLTS.match(value) if isinstance(value, str) else None
+    if m is not None:
+        if m.group("kind") is None:
+            n = m.group("number") + " " + m.group("prefix")
+            raise UnitError(
+                f"amplitude {value!r}: say peak-to-peak ({n}Vpp) or peak ({n}Vpk); "
+                "a bare V is ambiguous"
+            )
+        volts = parse_quantity(f"{m.group('number')} {m.group('prefix')}V", "voltage")
+        v, kind = volts * (1.0 if m.group("kind") in ("pp", "p-p") else 2.0), "generator_Vpp"
+    else:
         try:
             v, kind = parse_quantity(value, "length"), "displacement_m"
         except UnitError:
             raise UnitError(
-                f"amplitude {value!r}: write generator volts peak-to-peak ('2 Vpp') or an "
-                "actuator displacement ('1.5 um')"
+                f"amplitude {value!r}: write generator volts peak-to-peak ('2 Vpp') or peak "
+                "('1 Vpk'), or a peak actuator displacement ('1.5 um')"
             ) from None
     if not (math.isfinite(v) and v > 0):
         raise UnitError(f"amplitude must be > 0, got {value!r}")
     return kind, v
+
+
+#: bounds of the protocol's numbers: (low, high) in SI; a value outside is refused
+BOUNDS: dict[str, tuple[float, float]] = {
+    "f_center": (1.0, 10e6),  # Hz
+    "cycles": (1.0, 1000.0),
+    "width": (1e-7, 1.0),  # s
+    "rate": (1e3, 100e6),  # S/s
+    "duration": (1e-5, 10.0),  # s, one record
+    "pre_trigger": (0.0, 1.0),  # s
+    "timeout": (10e-3, 3600.0),  # s, one read
+    "settle": (0.0, 600.0),  # s, after each move
+}
+
+
+def _within(field: str, value: float, dimension: str | None, named: bool = True) -> None:
+    """Refuse ``value`` outside :data:`BOUNDS` ``[field]`` naming the value and the range
+    (and the field, for a model-level check: ``named``)."""
+    lo, hi = BOUNDS[field]
+    if math.isfinite(value) and lo <= value <= hi:
+        return
+
+    def show(x: float) -> str:
+        if dimension == "time" and x >= 1000:
+            return f"{x:.4g} s"
+        return format_quantity(x, dimension) if dimension else f"{x:g}"
+
+    why = (
+        f"{show(value)} is outside {show(lo)} .. {show(hi)}"
+        if math.isfinite(value)
+        else f"{value!r} is not a finite number; give {show(lo)} .. {show(hi)}"
+    )
+    raise ValueError(f"{field}: {why}" if named else why)
+
+
+def _whole(field: str, v: Any, low: int, high: int) -> int:
+    """A whole number ``low .. high`` (not a boolean, not a float) or a one-line refusal."""
+    if isinstance(v, bool) or not isinstance(v, int) or not low <= v <= high:
+        shown = ("true" if v else "false") if isinstance(v, bool) else repr(v)
+        raise ValueError(f"{shown}: give a whole number from {low} to {high}")
+    return v
+
+
+def _no_bool(v: Any) -> Any:
+    if isinstance(v, bool):
+        raise ValueError(f"expected a number, got {'true' if v else 'false'}")
+    return v
 
 
 class BurstSpec(_Model):
@@ -91,6 +177,11 @@ class BurstSpec(_Model):
     sigma_f: Frequency | None = None
     shape: str | None = None
 
+    @field_validator("cycles", mode="before")
+    @classmethod
+    def _cycles_number(cls, v: Any) -> Any:
+        return _no_bool(v)
+
     @model_validator(mode="after")
     def _one_of(self) -> BurstSpec:
         from instruments.burst import NAMED_BURSTS
@@ -98,14 +189,16 @@ class BurstSpec(_Model):
         given = [self.cycles, self.width, self.sigma_f, self.shape]
         if sum(x is not None for x in given) != 1:
             raise ValueError("give exactly one of 'cycles', 'width', 'sigma_f' or 'shape'")
-        if self.f_center <= 0:
-            raise ValueError("f_center must be > 0")
-        if self.cycles is not None and not self.cycles > 0:
-            raise ValueError("cycles must be > 0")
-        if self.width is not None and not self.width > 0:
-            raise ValueError("width must be > 0")
-        if self.sigma_f is not None and not self.sigma_f > 0:
-            raise ValueError("sigma_f must be > 0")
+        _within("f_center", self.f_center, "frequency")
+        if self.cycles is not None:
+            _within("cycles", self.cycles, None)
+        if self.width is not None:
+            _within("width", self.width, "time")
+        if self.sigma_f is not None and not 0 < self.sigma_f < self.f_center:
+            raise ValueError(
+                f"sigma_f: {format_quantity(self.sigma_f, 'frequency')} must be > 0 and below "
+                f"f_center ({format_quantity(self.f_center, 'frequency')})"
+            )
         if self.shape is not None and self.shape not in NAMED_BURSTS:
             raise ValueError(f"shape: one of {', '.join(NAMED_BURSTS)}, got {self.shape!r}")
         return self
@@ -128,7 +221,13 @@ class AmplitudeRange(_Model):
 
     start: str
     stop: str
-    count: int = Field(ge=1, le=10_000)
+    count: int
+
+    @field_validator("count", mode="before")
+    @classmethod
+    def _count(cls, v: Any) -> int:
+        return _whole("count", v, 1, 10_000)
+
     spacing: Literal["linear", "log"] = "linear"
 
     @field_validator("start", "stop", mode="before")
@@ -147,15 +246,18 @@ class AcquisitionSpec(_Model):
     timeout: Duration = 10.0
 
     @model_validator(mode="after")
-    def _positive(self) -> AcquisitionSpec:
-        if not self.rate > 0:
-            raise ValueError("rate must be > 0")
-        if not self.duration > 0:
-            raise ValueError("duration must be > 0")
-        if self.pre_trigger < 0:
-            raise ValueError("pre_trigger must be >= 0")
-        if not self.timeout > 0:
-            raise ValueError("timeout must be > 0")
+    def _bounded(self) -> AcquisitionSpec:
+        _within("rate", self.rate, "sample_rate")
+        _within("duration", self.duration, "time")
+        _within("pre_trigger", self.pre_trigger, "time")
+        _within("timeout", self.timeout, "time")
+        record = self.pre_trigger + self.duration
+        if self.timeout <= record:
+            raise ValueError(
+                f"timeout: {format_quantity(self.timeout, 'time')} is not longer than the "
+                f"record ({format_quantity(record, 'time')} with the pre-trigger): every read "
+                "would time out"
+            )
         return self
 
     @property
@@ -182,14 +284,14 @@ class Protocol(_Model):
     directions: list[Direction] | Literal["both"]
     burst: dict[Direction, BurstSpec]
     amplitudes: list[str] | AmplitudeRange
-    cylinders: Literal["all"] | list[Annotated[int, Field(ge=1)]] = "all"
-    averages: int = Field(default=1, ge=1, le=100_000)
+    cylinders: Literal["all"] | list[int] = "all"
+    averages: int = 1
     acquisition: AcquisitionSpec
     settle: Duration = 0.0
     order: list[LoopName] = Field(default_factory=lambda: list(_DEFAULT_ORDER))
     output: str = "runs/{name}_{timestamp}.h5"
     on_point_failure: Literal["continue", "stop"] = "continue"
-    retries: int = Field(default=2, ge=0, le=100)
+    retries: int = 2
 
     @field_validator("name")
     @classmethod
@@ -231,10 +333,41 @@ class Protocol(_Model):
         if isinstance(v, list):
             if not v:
                 raise ValueError("give at least one amplitude")
+            if len(v) > 10_000:
+                raise ValueError(f"{len(v)} amplitudes; at most 10000")
             kinds = {parse_amplitude(a)[0] for a in v}
             if len(kinds) > 1:
                 raise ValueError("mix of generator (Vpp) and displacement (m) amplitudes")
             return [str(a) for a in v]
+        return v
+
+    @field_validator("averages", mode="before")
+    @classmethod
+    def _averages(cls, v: Any) -> int:
+        return _whole("averages", v, 1, 10_000)
+
+    @field_validator("retries", mode="before")
+    @classmethod
+    def _retries(cls, v: Any) -> int:
+        return _whole("retries", v, 0, 100)
+
+    @field_validator("cylinders", mode="before")
+    @classmethod
+    def _cylinder_list(cls, v: Any) -> Any:
+        if v == "all":
+            return v
+        if not isinstance(v, list):
+            raise ValueError(f"'all' or a list of cylinder numbers such as [1, 16, 31], got {v!r}")
+        if not v:
+            raise ValueError("[] names no cylinder; give 'all' or a list such as [1, 16, 31]")
+        if len(v) > 1000:
+            raise ValueError(f"{len(v)} cylinders listed; at most 1000")
+        for i, c in enumerate(v):
+            if isinstance(c, bool) or not isinstance(c, int) or not 1 <= c <= 1000:
+                shown = ("true" if c else "false") if isinstance(c, bool) else repr(c)
+                raise ValueError(
+                    f"entry {i + 1} ({shown}) is not a cylinder number (a whole number from 1)"
+                )
         return v
 
     @field_validator("directions", mode="before")
@@ -247,8 +380,7 @@ class Protocol(_Model):
     @field_validator("settle")
     @classmethod
     def _settle(cls, v: float) -> float:
-        if v < 0:
-            raise ValueError("settle must be >= 0")
+        _within("settle", v, "time", named=False)
         return v
 
     @model_validator(mode="after")

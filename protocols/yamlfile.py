@@ -269,6 +269,15 @@ def read_yaml_data(path: str | Path) -> Any:
     return None if doc.empty else doc.data
 
 
+def _shown(value: Any, limit: int = 60) -> str:
+    """``value`` as it reads in a one-line message (YAML's spelling of booleans, cut short)."""
+    if isinstance(value, bool):
+        text = "true" if value else "false"
+    else:
+        text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
 def validate(doc: YamlDoc, model: type[M], context: dict[str, Any] | None = None) -> M:
     """Validate ``doc.data`` against ``model``; the first error becomes a one-line
     :class:`ConfigError` naming the file, the line and the field."""
@@ -287,6 +296,8 @@ def validate(doc: YamlDoc, model: type[M], context: dict[str, Any] | None = None
         elif err["type"] == "missing":
             msg = "missing (required)"
         msg = msg.splitlines()[0]
+        if err["type"] not in ("value_error", "assertion_error", "extra_forbidden", "missing"):
+            msg += f", got {_shown(err.get('input'))}"  # pydantic's own checks omit the value
         # a model-level check names its field at the start of the message: "field: why"
         head, sep, tail = msg.partition(": ")
         if sep and " " not in head and isinstance(doc.data, dict):

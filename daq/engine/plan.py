@@ -8,7 +8,10 @@ stage travel, sample rate of the digitiser), each failure a one-line ``FILE:LINE
 from __future__ import annotations
 
 import itertools
+import math
 from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -18,7 +21,14 @@ from instruments.units import format_quantity
 from protocols.bench import BenchFile
 from protocols.schema import ProtocolFile
 
-__all__ = ["RECORD_OVERHEAD_S", "Plan", "Point", "make_plan"]
+__all__ = [
+    "MAX_RECORD_SAMPLES",
+    "MAX_RUN_BYTES",
+    "RECORD_OVERHEAD_S",
+    "Plan",
+    "Point",
+    "make_plan",
+]
 
 
 @dataclass(frozen=True)
@@ -68,15 +78,7 @@ def make_plan(pf: ProtocolFile, bf: BenchFile) -> Plan:
     if kind == "displacement_m" and bench.amplifier.kind != "displacement":
         raise pf.error(("amplitudes",), "displacement amplitudes need a displacement actuator")
     vpp = np.array([bench.generator_Vpp(a, kind) for a in amps])
-    for i, v in enumerate(vpp):
-        why = bench.amplitude_limit_error(float(v))
-        if why is not None:
-            shown = (
-                format_quantity(float(amps[i]), "length")
-                if kind == "displacement_m"
-                else f"{amps[i]:.4g} Vpp"
-            )
-            raise pf.error(("amplitudes",), f"amplitude {i + 1} ({shown}): {why}")
+    _check_amplitudes(pf, bf, vpp)
     n = bench.n_cylinders
     cyl = proto.cylinder_numbers(n)
     bad = [int(c) for c in cyl if not 1 <= c <= n]
@@ -109,6 +111,9 @@ def make_plan(pf: ProtocolFile, bf: BenchFile) -> Plan:
                 ("burst", d),
                 f"the burst lasts {burst.duration_s * 1e3:.4g} ms, longer than the record",
             )
+        _check_spectrum(pf, bf, d, burst)
+    _check_transit(pf, bf, cyl)
+    _check_memory(pf, len(proto.direction_list) * len(amps) * len(cyl))
     axes = {
         "direction": list(enumerate(proto.direction_list)),
         "amplitude": list(enumerate(amps)),
@@ -133,3 +138,138 @@ def make_plan(pf: ProtocolFile, bf: BenchFile) -> Plan:
         estimated_s=float(est),
         costs=costs,
     )
+
+
+#: the largest record (samples per channel) a protocol may ask for
+MAX_RECORD_SAMPLES = 10_000_000
+#: the most data a run may hold: velocity and drive, float32, every point (bytes)
+MAX_RUN_BYTES = 2 * 2**30
+
+
+def _check_amplitudes(pf: ProtocolFile, bf: BenchFile, vpp: NDArray[np.float64]) -> None:
+    """Each amplitude within the generator's and the piezo's limits, said in the unit the
+    protocol used (Vpp, Vpk or a displacement) and naming the bench field that binds."""
+    from protocols.schema import amplitude_notation
+
+    bench = bf.bench
+    amp = bench.amplifier
+    gen_max = bench.generator.max_amplitude
+    piezo_vpp = 2.0 * amp.piezo_max / amp.gain
+    max_vpp = min(gen_max, piezo_vpp)
+    bench_name = Path(bf.doc.source).name
+    written = pf.protocol.amplitudes
+    texts = [written.start, written.stop] if not isinstance(written, list) else written
+    notation = amplitude_notation(texts[0])
+    for i, v in enumerate(vpp):
+        if v <= max_vpp * (1 + 1e-12):
+            continue
+        if notation == "m":
+            per_m = 2.0 * bench.generator_V_per_m  # Vpp per metre of peak displacement
+            shown, limit = (
+                format_quantity(v / per_m, "length"),
+                format_quantity(max_vpp / per_m, "length"),
+            )
+        elif notation == "Vpk":
+            shown, limit = f"{v / 2:.4g} Vpk", f"{max_vpp / 2:.4g} Vpk"
+        else:
+            shown, limit = f"{v:.4g} Vpp", f"{max_vpp:.4g} Vpp"
+        if gen_max <= piezo_vpp:
+            why = (
+                f"it needs {v:.4g} Vpp from the generator, above generator.max_amplitude "
+                f"{gen_max:.4g} Vpp ({bench_name})"
+            )
+        else:
+            why = (
+                f"it gives {0.5 * v * amp.gain:.4g} V at the piezo, above amplifier.piezo_max "
+                f"{amp.piezo_max:.4g} V ({bench_name}, at gain {amp.gain:.4g})"
+            )
+        raise pf.error(
+            ("amplitudes",),
+            f"amplitude {i + 1} ({shown}) is above {limit}, the limit of this bench: {why}",
+        )
+
+
+def _check_spectrum(pf: ProtocolFile, bf: BenchFile, direction: str, burst: Any) -> None:
+    """The burst's band (f_center + 3 sigma_f) below the Nyquist frequency of the record and
+    of the generator's waveform, and within the vibrometer range's frequency range."""
+    from instruments.polytec import range_max_frequency_Hz
+
+    acq, bench = pf.protocol.acquisition, bf.bench
+    f_top = burst.f_center_Hz + 3.0 * burst.sigma_f_Hz
+    where = ("burst", direction, "f_center")
+    f_c = format_quantity(burst.f_center_Hz, "frequency")
+    band = f"{f_c} burst (up to {format_quantity(f_top, 'frequency')} with its band)"
+    if f_top >= acq.rate / 2:
+        need = format_quantity(2 * f_top, "sample_rate")
+        raise pf.error(
+            where,
+            f"the {band} is above the Nyquist frequency "
+            f"{format_quantity(acq.rate / 2, 'frequency')} of the "
+            f"{format_quantity(acq.rate, 'sample_rate')} record; record at more than {need} "
+            f"(acquisition.rate; this bench allows "
+            f"{format_quantity(bench.daq.max_rate, 'sample_rate')}) or lower f_center",
+        )
+    if f_top >= bench.generator.sample_rate / 2:
+        raise pf.error(
+            where,
+            f"the {band} is above the Nyquist frequency of the generator's "
+            f"{format_quantity(bench.generator.sample_rate, 'sample_rate')} waveform "
+            f"({bf.doc.source}: generator.sample_rate)",
+        )
+    f_max = range_max_frequency_Hz(bench.vibrometer.range)
+    if f_max is not None and f_top > f_max:
+        raise pf.error(
+            where,
+            f"the {band} is above the {format_quantity(f_max, 'frequency')} the vibrometer "
+            f"measures on {bench.vibrometer.range!r} ({bf.doc.source}: vibrometer.range)",
+        )
+
+
+def _check_transit(pf: ProtocolFile, bf: BenchFile, cylinders: NDArray[np.int32]) -> None:
+    """The record holds each burst and its transit to the farthest cylinder measured: at
+    least one contact's crossing time sqrt(m0 / K) per contact, ``m0`` the lightest
+    cylinder's rigid (non-resonating) mass and ``K`` the linearised contact stiffness of the
+    bench's chain: no wave crosses faster, so a shorter record cannot hold its arrival."""
+    from daq.chain_info import chain_spec
+    from sim_backend import dem
+
+    proto = pf.protocol
+    chain = dem.build_chain(chain_spec(bf))
+    per_contact = math.sqrt(float(np.min(chain.m0_kg)) / float(chain.K_lin))
+    n = bf.bench.n_cylinders
+    for d in proto.direction_list:
+        burst = proto.burst[d].burst()
+        far = int(np.max(cylinders - 1)) if d == "ltr" else int(np.max(n - cylinders))
+        far_cyl = far + 1 if d == "ltr" else n - far
+        need = burst.duration_s + far * per_contact
+        if proto.acquisition.duration < need:
+            raise pf.error(
+                ("acquisition", "duration"),
+                f"{format_quantity(proto.acquisition.duration, 'time')} cannot hold the {d} "
+                f"burst ({format_quantity(burst.duration_s, 'time')}) and its transit to "
+                f"cylinder {far_cyl} (at least {format_quantity(far * per_contact, 'time')} "
+                f"over {far} contacts); record at least {format_quantity(need, 'time')}",
+            )
+
+
+def _check_memory(pf: ProtocolFile, n_points: int) -> None:
+    """The record and the run's data within :data:`MAX_RECORD_SAMPLES` and
+    :data:`MAX_RUN_BYTES`, before anything is allocated."""
+    acq = pf.protocol.acquisition
+    samples = acq.n_samples()
+    if samples > MAX_RECORD_SAMPLES:
+        raise pf.error(
+            ("acquisition", "duration"),
+            f"a record of {samples:,} samples per channel "
+            f"({format_quantity(acq.duration + acq.pre_trigger, 'time')} at "
+            f"{format_quantity(acq.rate, 'sample_rate')}) is above the bound of "
+            f"{MAX_RECORD_SAMPLES:,}; shorten it or lower the rate",
+        )
+    data = n_points * samples * 2 * 4  # velocity and drive, float32
+    if data > MAX_RUN_BYTES:
+        raise pf.error(
+            ("acquisition", "duration"),
+            f"the run would hold {data / 2**30:.3g} GiB ({n_points:,} points x {samples:,} "
+            f"samples x 2 channels x 4 bytes), above the bound of "
+            f"{MAX_RUN_BYTES / 2**30:g} GiB; measure fewer points or shorter records",
+        )

@@ -112,7 +112,9 @@ def check_output_path(path: Path, *, resume: bool = False) -> None:
         raise StoreError(f"--out: cannot write in {probe} (permission denied)")
     cannot = _cannot_create_in(probe)
     if cannot is not None:
-        raise StoreError(f"--out: cannot write in {probe} ({cannot})")
+        raise StoreError(
+            f"--out: cannot write {path}: nothing can be created in {probe} ({cannot})"
+        )
 
 
 def _cannot_create_in(folder: Path) -> str | None:

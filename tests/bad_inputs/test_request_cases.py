@@ -228,14 +228,14 @@ def test_dry_run_of_a_refused_resume_is_refused_too(tmp_path: Path, refused) -> 
 @pytest.mark.skipif(not Path("/proc/self").is_dir(), reason="needs /proc")
 def test_out_in_proc_is_refused_up_front(tmp_path: Path, refused) -> None:
     line = refused([str(_protocol(tmp_path)), "--out", "/proc/x.h5"])
-    assert line.startswith("--out: cannot write in /proc")
+    assert line.startswith("--out: cannot write /proc/x.h5: nothing can be created in /proc")
     assert not Path("/proc/x.h5").exists()
 
 
 @pytest.mark.skipif(not Path("/proc/self").is_dir(), reason="needs /proc")
 def test_out_under_proc_in_a_new_folder_is_refused(tmp_path: Path, refused) -> None:
     line = refused([str(_protocol(tmp_path)), "--out", "/proc/runs/x.h5"])
-    assert line.startswith("--out: cannot write in /proc")
+    assert line.startswith("--out: cannot write /proc/runs/x.h5: nothing can be created in /proc")
 
 
 # -- Ctrl-C before the program has started -------------------------------------------------

@@ -135,6 +135,28 @@ def test_validation_error_shown_in_protocol_panel(qtbot: Any, window: MainWindow
     assert "6 points" in pp.status_label.text()
 
 
+def test_the_window_refuses_what_run_protocol_refuses_as_typed(
+    qtbot: Any, window: MainWindow
+) -> None:
+    """Issue 16: the editor's text goes through daq.request.validate_request, the check of
+    run_protocol: a record too short for the burst's transit, a bare '1 V' amplitude."""
+    from daq.request import RequestError, validate_request
+    from protocols.schema import parse_protocol
+
+    pp = window.protocol_panel
+    text = SMOKE.read_text()
+    short = text.replace("duration: 10 ms", "duration: 2.5 ms")
+    with pytest.raises(RequestError) as refused:
+        validate_request(parse_protocol(short, "smoke.yaml"), window.bench_file)
+    pp.editor.setPlainText(short)
+    qtbot.waitUntil(lambda: not pp.valid, timeout=2000)
+    assert pp.status_label.text() == f"✗ {refused.value}"
+    assert "transit" in pp.status_label.text()
+    pp.editor.setPlainText(text.replace("[0.5 um, 3 um]", "[1 V]"))
+    qtbot.waitUntil(lambda: "Vpk" in pp.status_label.text(), timeout=2000)
+    assert not pp.valid and not window.start_run() and window.engine is None
+
+
 def test_close_during_run_aborts_safely(qtbot: Any, tmp_path: Path) -> None:
     win = MainWindow(None, SMOKE, assembler=make_assembler(read_sleep_s=0.1))
     qtbot.addWidget(win)

@@ -155,8 +155,9 @@ def test_amplitude_above_the_piezo_limit_via_the_cli(tmp_path: Path, capsys) -> 
     err = capsys.readouterr().err.strip()
     assert code == 2
     assert err == (
-        f"run_protocol: error: {proto}:5: amplitudes: amplitude 2 (3 um): 6 Vpp gives 60 V at "
-        "the piezo, above its limit 50 V"
+        f"run_protocol: error: {proto}:5: amplitudes: amplitude 2 (3 um) is above 2.5 um, the "
+        "limit of this bench: it gives 60 V at the piezo, above amplifier.piezo_max 50 V "
+        "(bench.yaml, at gain 20)"
     )
     assert not (tmp_path / "o.h5").exists()
 
