@@ -32,6 +32,7 @@ __all__ = [
     "alpha_sweep_from_study",
     "default_axes",
     "format_ranking",
+    "parse_condition",
     "phase_map",
     "rank_designs",
     "select_cells",
@@ -181,15 +182,40 @@ def _target(target: str) -> tuple[str, bool]:
     return name, largest
 
 
+def parse_condition(text: str) -> tuple[str, str, float]:
+    """``"transmission_ltr>0.01"`` -> ``("transmission_ltr", ">", 0.01)`` (SI value)."""
+    for op in (">=", "<=", ">", "<"):
+        name, sep, value = text.partition(op)
+        if sep:
+            try:
+                return name.strip(), op, float(value)
+            except ValueError:
+                break
+    raise ValueError(f"condition {text!r}: write METRIC>VALUE or METRIC<VALUE (SI)")
+
+
 def rank_designs(
-    data: StudyData, target: str, *, top: int = 10, fixed: dict[str, float] | None = None
+    data: StudyData,
+    target: str,
+    *,
+    top: int = 10,
+    fixed: dict[str, float] | None = None,
+    where: list[tuple[str, str, float]] | None = None,
 ) -> list[dict[str, float]]:
-    """The ``top`` cells for ``target`` (a metric; ``min:NAME`` for the smallest), each as
-    ``{"cell", "rank", parameters..., target, other metrics...}`` (SI)."""
+    """The ``top`` cells for ``target`` (a metric; ``min:NAME`` for the smallest) among those
+    meeting every ``where`` condition (:func:`parse_condition`), each as ``{"cell", "rank",
+    parameters..., target, other metrics...}`` (SI)."""
     name, largest = _target(target)
     if name not in data.metrics:
         raise ValueError(f"target {name!r}: one of the study's metrics ({', '.join(data.metrics)})")
     keep, _ = select_cells(data, fixed)
+    for metric, op, value in where or []:
+        if metric not in data.metrics:
+            raise ValueError(f"condition on {metric!r}: one of {', '.join(data.metrics)}")
+        col = data.metrics[metric]
+        with np.errstate(invalid="ignore"):
+            keep = keep & {">": col > value, "<": col < value, ">=": col >= value,
+                           "<=": col <= value}[op]  # fmt: skip
     vals = data.metrics[name]
     idx = np.flatnonzero(keep & np.isfinite(vals))
     order = idx[np.argsort(-vals[idx] if largest else vals[idx], kind="stable")][:top]

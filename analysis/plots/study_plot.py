@@ -33,16 +33,22 @@ def axis_label(name: str, unit: str) -> str:
 
 def plot_phase_map(pm: PhaseMap, units: dict[str, str]) -> Figure:
     """One heat map: x and y the two parameters, colour the metric (log scale for energy
-    ratios); grey hatching where no cell counted; the fixed and marginalised parameters in the
-    title."""
+    ratios, floored at 1e-4 of the largest); grey hatching where no cell counted; the fixed
+    and marginalised parameters in the title."""
     kx, _ = display_scale(pm.x_name, units.get(pm.x_name, ""))
     ky, _ = display_scale(pm.y_name, units.get(pm.y_name, ""))
     kv, _ = display_scale(pm.metric, pm.unit)
     vals = pm.values * kv
     finite = vals[np.isfinite(vals)]
     norm: Normalize
-    if pm.metric.startswith(_LOG) and finite.size and finite.min() > 0:
-        norm = LogNorm(vmin=float(finite.min()), vmax=float(max(finite.max(), finite.min() * 1.01)))
+    positive = finite[finite > 0]
+    if pm.metric.startswith(_LOG) and positive.size:
+        # energy ratios span decades: log colours, floored at 1e-4 of the largest (0 and
+        # anything below the floor drawn in the floor's colour)
+        top = float(positive.max())
+        low = max(float(positive.min()), top * 1e-4)
+        vals = np.where(np.isfinite(vals), np.maximum(vals, low), np.nan)
+        norm = LogNorm(vmin=low, vmax=max(top, low * 1.01))
     else:
         norm = Normalize(
             vmin=float(finite.min()) if finite.size else 0.0,

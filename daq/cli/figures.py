@@ -4,7 +4,8 @@ study, or the alpha sweep.
     biafc figures RUN.h5 [--out DIR]
     biafc figures STUDY.h5 [--x diameter --y preload] [--metric asymmetry_ratio]
                   [--fix amplitude=2um] [--reduce mean|median|max|min]
-                  [--target asymmetry_ratio | min:error_estimate_ltr] [--top 10] [--out DIR]
+                  [--target asymmetry_ratio | min:error_estimate_ltr] [--top 10]
+                  [--where transmission_ltr>0.01] [--out DIR]
     biafc figures --alpha-sweep [--alphas 0.1,0.2] [--amplitude 2um] [--duration 8ms]
                   [--cycles 10] [--out DIR]
 
@@ -71,6 +72,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--target", default=None, help="metric to rank designs by (min:NAME for the smallest)"
     )
     study.add_argument("--top", type=int, default=10, help="designs in the ranked table")
+    study.add_argument(
+        "--where",
+        action="append",
+        default=[],
+        metavar="METRIC>VALUE",
+        help="rank only cells meeting it (transmission_ltr>0.01; SI; repeatable)",
+    )
 
 
 def _alpha_sweep(args: argparse.Namespace) -> int:
@@ -133,8 +141,8 @@ def run(args: argparse.Namespace) -> int:
     for name in ("x", "y", "metric", "target"):
         if getattr(args, name) is not None:
             raise CliError(f"--{name} applies only to a study output")
-    if args.fix:
-        raise CliError("--fix applies only to a study output")
+    if args.fix or args.where:
+        raise CliError("--fix and --where apply only to a study output")
     from analysis.report import write_figures
     from daq.cli.run_input import read_run_file
 
@@ -184,6 +192,7 @@ def _study_figures(args: argparse.Namespace, path: Path) -> int:
     from analysis.study_maps import (
         alpha_sweep_from_study,
         format_ranking,
+        parse_condition,
         phase_map,
         rank_designs,
         varying_parameters,
@@ -224,10 +233,13 @@ def _study_figures(args: argparse.Namespace, path: Path) -> int:
             written += write_alpha_sweep(sweep, out)
     target = args.target or ("asymmetry_ratio" if "asymmetry_ratio" in data.metrics else metrics[0])
     try:
-        rows = rank_designs(data, target, top=args.top, fixed=fixed)
+        where = [parse_condition(w) for w in args.where]
+        rows = rank_designs(data, target, top=args.top, fixed=fixed, where=where)
     except ValueError as exc:
         raise CliError(str(exc)) from None
     table = format_ranking(rows, data, target)
+    if args.where:
+        table += f"\n(among cells with {' and '.join(args.where)})"
     print(table)
     out.mkdir(parents=True, exist_ok=True)
     ranking = out / "best_designs.txt"

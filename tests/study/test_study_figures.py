@@ -79,3 +79,26 @@ def test_fig4_from_a_study_over_alpha(tmp_path: Path) -> None:
     assert np.all(np.isfinite(sweep.output_Hz["rtl"]))
     assert main(["figures", str(out), "--out", str(tmp_path / "f")]) == 0
     assert (tmp_path / "f" / "alpha_sweep.png").exists()
+
+
+def test_the_ranking_keeps_only_cells_meeting_the_conditions(serial_reference: Path) -> None:
+    from analysis.study_maps import parse_condition
+
+    data = read_study(serial_reference)
+    cut = float(np.median(data.metrics["transmission_rtl"]))
+    rows = rank_designs(data, "asymmetry_ratio", top=50, where=[parse_condition(
+        f"transmission_rtl>{cut!r}")])  # fmt: skip
+    assert rows and all(r["transmission_rtl"] > cut for r in rows)
+    assert len(rows) == int(np.sum(data.metrics["transmission_rtl"] > cut))
+    with pytest.raises(ValueError, match="METRIC>VALUE"):
+        parse_condition("transmission_rtl=3")
+
+
+def test_the_shipped_studies_load_and_the_example_is_small() -> None:
+    from protocols.study import cell_table, load_study, shipped_studies
+
+    assert {"example", "diameter_preload"} <= set(shipped_studies())
+    for name in shipped_studies():
+        assert cell_table(load_study(name).study).n_cells > 0
+    example = load_study("example").study
+    assert cell_table(example).n_cells <= 100 and example.simulation.duration <= 10e-3
