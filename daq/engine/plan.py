@@ -209,20 +209,51 @@ def _check_spectrum(pf: ProtocolFile, bf: BenchFile, direction: str, burst: Any)
             f"(acquisition.rate; this bench allows "
             f"{format_quantity(bench.daq.max_rate, 'sample_rate')}) or lower f_center",
         )
+    gen_rate = bench.generator.sample_rate
+    limits = _generator_limits(bf)
+    if gen_rate > limits.max_sample_rate_Hz:
+        raise bf.doc.error(
+            ("generator", "sample_rate"),
+            f"{format_quantity(gen_rate, 'sample_rate')} is above the generator driver's "
+            f"{format_quantity(limits.max_sample_rate_Hz, 'sample_rate')} waveform rate",
+        )
+    points = round(burst.duration_s * gen_rate) + 1  # as instruments.burst samples it
+    if points > limits.max_points:
+        raise pf.error(
+            ("burst", direction),
+            f"the burst ({format_quantity(burst.duration_s, 'time')}) takes {points:,} waveform "
+            f"points at the generator's {format_quantity(gen_rate, 'sample_rate')} "
+            f"({Path(bf.doc.source).name}: generator.sample_rate); the generator holds at most "
+            f"{limits.max_points:,}",
+        )
     if f_top >= bench.generator.sample_rate / 2:
         raise pf.error(
             where,
             f"the {band} is above the Nyquist frequency of the generator's "
             f"{format_quantity(bench.generator.sample_rate, 'sample_rate')} waveform "
-            f"({bf.doc.source}: generator.sample_rate)",
+            f"({Path(bf.doc.source).name}: generator.sample_rate)",
         )
     f_max = range_max_frequency_Hz(bench.vibrometer.range)
     if f_max is not None and f_top > f_max:
         raise pf.error(
             where,
             f"the {band} is above the {format_quantity(f_max, 'frequency')} the vibrometer "
-            f"measures on {bench.vibrometer.range!r} ({bf.doc.source}: vibrometer.range)",
+            f"measures on {bench.vibrometer.range!r} "
+            f"({Path(bf.doc.source).name}: vibrometer.range)",
         )
+
+
+def _generator_limits(bf: BenchFile) -> Any:
+    """The generator driver's limits for this bench, built as :mod:`daq.connect` builds them
+    (waveform rate and length ceilings are the driver's)."""
+    from instruments.keysight import GeneratorLimits
+
+    b = bf.bench
+    return GeneratorLimits(
+        max_piezo_V=b.amplifier.piezo_max,
+        amplifier_gain=b.amplifier.gain,
+        max_amplitude_Vpp=b.generator.max_amplitude,
+    )
 
 
 def _check_transit(pf: ProtocolFile, bf: BenchFile, cylinders: NDArray[np.int32]) -> None:
