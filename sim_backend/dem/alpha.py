@@ -11,16 +11,18 @@ from __future__ import annotations
 
 import math
 from functools import lru_cache
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.interpolate import CubicSpline
-from scipy.optimize import brentq
 
 from sim_backend.dem.bands import Bands
 from sim_backend.dem.beam import beam_modes
 from sim_backend.dem.contact import hertz_beta, linear_stiffness
 from sim_backend.dem.spec import ChainFileError, ChainSpec, default_chain_spec
+
+if TYPE_CHECKING:  # scipy.interpolate costs 0.3-1 s to import: only where a chain is designed
+    from scipy.interpolate import CubicSpline
 
 __all__ = ["asymmetry_factor", "chain_spec_for_alpha"]
 
@@ -43,6 +45,8 @@ def asymmetry_factor(bands: Bands) -> float:
 
 def _band1_edges(length_m: float, spec: ChainSpec) -> tuple[float, float]:
     """(onset, cutoff) of the first local-resonance band of one cylinder, Hz."""
+    from scipy.optimize import brentq
+
     material = spec.material.to_material()
     modes = beam_modes(length_m, spec.diameter, material, spec.n_modes, spec.beam_theory)
     k4 = 4.0 * linear_stiffness(spec.preload, hertz_beta(spec.diameter, material))
@@ -68,6 +72,8 @@ def _band1_edges(length_m: float, spec: ChainSpec) -> tuple[float, float]:
 @lru_cache(maxsize=16)
 def _edge_splines(spec_json: str, l_cen: float) -> tuple[CubicSpline, CubicSpline, CubicSpline]:
     """Splines in log space: length from onset, onset from length, cutoff from length."""
+    from scipy.interpolate import CubicSpline
+
     spec = ChainSpec.model_validate_json(spec_json)
     lengths = l_cen * np.geomspace(_LENGTH_RANGE[0], _LENGTH_RANGE[1], 161)
     edges = np.array([_band1_edges(float(L), spec) for L in lengths])
@@ -97,6 +103,8 @@ def chain_spec_for_alpha(alpha: float, base: ChainSpec | None = None) -> ChainSp
     lengths for even N), diameter, preload, material, modes, ends and damping. Raises
     :class:`ChainFileError` naming ``alpha`` when no such chain exists.
     """
+    from scipy.optimize import brentq
+
     base = base if base is not None else default_chain_spec()
     if not (isinstance(alpha, int | float) and math.isfinite(alpha) and alpha >= 0.0):
         raise ChainFileError(f"alpha: must be a finite number >= 0, got {alpha!r}")

@@ -15,7 +15,6 @@ from functools import partial
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import brentq
 
 from sim_backend.dem.beam import apparent_mass_kg, beam_modes
 from sim_backend.dem.chain import Chain
@@ -53,6 +52,8 @@ def _beam_mass(length_m: float, chain: Chain, theory: str, w: float) -> float:
 def _edges(
     mass_fn: Callable[[float], float], poles: NDArray[np.float64], k4: float, n_bands: int
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    from scipy.optimize import brentq  # 0.2-1 s to import: only where bands are computed
+
     onset = np.zeros(n_bands)
     cutoff = np.zeros(n_bands)
     for b in range(n_bands):

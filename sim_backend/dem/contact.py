@@ -12,9 +12,6 @@ from __future__ import annotations
 
 import math
 
-from scipy.optimize import brentq
-from scipy.special import ellipe, ellipk
-
 from sim_backend.dem.material import Material
 
 __all__ = [
@@ -31,6 +28,8 @@ MIN_CROSSING_ANGLE_RAD = math.radians(10.0)
 
 def _curvature_ratio(m: float) -> float:
     """B/A of an elliptical Hertz contact with parameter ``m = e^2`` (0 <= m < 1)."""
+    from scipy.special import ellipe, ellipk
+
     K, E = ellipk(m), ellipe(m)
     return float((E / (1.0 - m) - K) / (K - E))
 
@@ -50,6 +49,10 @@ def hertz_beta(
         )
     if c < 1e-9:
         return 4.0 / 3.0 * E_star * math.sqrt(R)
+    # scipy.optimize and .special only here: they cost 0.2-1 s to import
+    from scipy.optimize import brentq
+    from scipy.special import ellipe, ellipk
+
     A = 0.5 * (1.0 - c) / R
     B = 0.5 * (1.0 + c) / R
     ratio = B / A
