@@ -143,13 +143,13 @@ def test_stability_check_runs_once_per_chain_and_step(
     monkeypatch.setattr(step_limit, "_RANGE_CACHE", {}, raising=False)
     monkeypatch.setattr(step_limit, "_STABLE_CACHE", {})
     calls = []
-    radius = step_limit.spectral_radius
+    stable_at = step_limit._stable_at
 
-    def counting(*args: object, **kwargs: object) -> float:
+    def counting(*args: object, **kwargs: object) -> bool:
         calls.append(args)
-        return radius(*args, **kwargs)  # type: ignore[arg-type]
+        return stable_at(*args, **kwargs)  # type: ignore[arg-type]
 
-    monkeypatch.setattr(step_limit, "spectral_radius", counting)
+    monkeypatch.setattr(step_limit, "_stable_at", counting)
     amplitudes = undamped.delta0_m * np.geomspace(0.05, 3.0, 24)
     drives = [dem.Drive("ltr", "displacement", float(a), burst=Burst(8.92e3)) for a in amplitudes]
     for d in drives:  # one key each, as the simulated bench's DEM runs are
@@ -172,3 +172,113 @@ def test_range_check_refuses_what_the_two_point_check_refuses(undamped: dem.Chai
             if not step_limit.is_stable(undamped, "strang", h, ov):
                 assert not step_limit.stable_up_to(undamped, "strang", h, ov)
     assert step_limit.stable_up_to(undamped, "strang", 0.98 * lim.h_max_s, 4 * undamped.delta0_m)
+
+
+def _dense_step_map(chain: dem.Chain, integrator: str, h: float, k: float) -> np.ndarray:
+    """The [2D, 2D] one-step map from dense matrices: Phi^T Kc Phi and 2x2 rotations per mode
+    (written here from the splitting's definition, independently of step_limit's fast path)."""
+    modes = simulation.block_modes(chain)
+    _, a_w, b_w = simulation.INTEGRATORS[integrator]
+    n, K = modes.phi0.shape
+    D = n * K
+    Phi = np.zeros((n, D))
+    for i in range(n):
+        Phi[i, i * K : (i + 1) * K] = modes.phi0[i]
+    kc = np.zeros((n, n))
+    for j in range(n + 1):  # contacts: wall | 1 | 2 | ... | n | wall
+        left, right = j - 1, j
+        for a in (left, right):
+            for b in (left, right):
+                if 0 <= a < n and 0 <= b < n and (chain.far_end == "wall" or j < n):
+                    kc[a, b] += k if a == b else -k
+    stiff = Phi.T @ kc @ Phi
+    om = modes.omega.ravel()
+    M = np.eye(2 * D)
+
+    def drift(t: float) -> np.ndarray:
+        c = np.cos(om * t)
+        s = np.where(om > 0, np.sin(om * t) / np.where(om > 0, om, 1.0), t)
+        return np.block([[np.diag(c), np.diag(s)], [np.diag(-om * np.sin(om * t)), np.diag(c)]])
+
+    for stage, b in enumerate(b_w):
+        M = drift(a_w[stage] * h) @ M
+        M = np.block([[np.eye(D), np.zeros((D, D))], [-b * h * stiff, np.eye(D)]]) @ M
+    return drift(a_w[-1] * h) @ M
+
+
+@pytest.mark.parametrize("integrator", ["blanes-moan4", "strang", "yoshida4"])
+def test_reduced_spectral_radius_equals_the_dense_eigenvalues(
+    undamped: dem.Chain, integrator: str
+) -> None:
+    """The position-block reduction (size D, symmetric when B > 0) gives the dense map's
+    spectral radius, stable and unstable steps alike, on both of its paths (a 12-cylinder
+    chain, so that the dense reference is cheap)."""
+    undamped = dem.build_chain(undamped.spec.model_copy(update={"n_cylinders": 12}))
+    h_top = math.pi / float(simulation.block_modes(undamped).omega.max())
+    paths, verdicts = set(), set()
+    for hf in (0.3, 0.9, 1.3, 2.0, 4.0):
+        for ov in (1.0, 4.0, 16.0):
+            h = hf * h_top
+            k = step_limit.contact_stiffness_N_per_m(undamped, ov * undamped.delta0_m)
+            dense = float(
+                np.abs(np.linalg.eigvals(_dense_step_map(undamped, integrator, h, k))).max()
+            )
+            got = step_limit.spectral_radius(undamped, integrator, h, ov * undamped.delta0_m)
+            assert got == pytest.approx(dense, rel=1e-9, abs=1e-9)
+            stable = step_limit._stable_at(undamped, integrator, h, ov * undamped.delta0_m)
+            assert stable == (dense <= 1.0 + step_limit.STABILITY_TOL)
+            verdicts.add(stable)
+            Q, _ = step_limit._step_map(step_limit._windows(undamped)[0], integrator, h, k)
+            B = Q[:, Q.shape[0] :]
+            paths.add(bool(np.all(np.linalg.eigvalsh(0.5 * (B + B.T)) > 0)))
+    assert paths == {True, False}  # the symmetric and the general path both ran
+    assert verdicts == {True, False}
+
+
+def test_spectral_radius_solves_one_position_block_and_reuses_the_block_modes(
+    undamped: dem.Chain, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """No eigenvalue problem of the whole [2D, 2D] map (D = 124 here), and the chain's block
+    modes computed once for a scan, not once per overlap."""
+    sizes: list[int] = []
+    calls = {"block_modes": 0}
+    eigvals, eigvalsh, block_modes = np.linalg.eigvals, np.linalg.eigvalsh, simulation.block_modes
+
+    def eigvals_spy(a: np.ndarray) -> object:
+        sizes.append(a.shape[0])
+        return eigvals(a)
+
+    def eigvalsh_spy(a: np.ndarray) -> object:
+        sizes.append(a.shape[0])
+        return eigvalsh(a)
+
+    def block_modes_spy(chain: dem.Chain) -> object:
+        calls["block_modes"] += 1
+        return block_modes(chain)
+
+    monkeypatch.setattr(np.linalg, "eigvals", eigvals_spy)
+    monkeypatch.setattr(np.linalg, "eigvalsh", eigvalsh_spy)
+    monkeypatch.setattr(simulation, "block_modes", block_modes_spy)
+    monkeypatch.setattr(step_limit, "_WINDOW_CACHE", {})
+    for ov in (1.0, 2.0, 4.0):
+        for h in (1e-6, 4e-6, 12e-6):
+            step_limit.spectral_radius(undamped, "blanes-moan4", h, ov * undamped.delta0_m)
+    D = undamped.n * (undamped.n_modes + 1)
+    assert sizes and max(sizes) == D
+    assert calls["block_modes"] == 1
+
+
+def test_importing_the_model_leaves_scipy_solvers_unimported() -> None:
+    """``import sim_backend.dem`` (every command that runs the model pays it) loads no
+    scipy.interpolate, scipy.optimize, scipy.special or scipy.linalg: 0.3 s to 1 s of imports
+    that only designing a chain, computing bands or the first simulation needs."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, sim_backend.dem; "
+        "print(sorted(m for m in ('scipy.interpolate', 'scipy.optimize', 'scipy.special', "
+        "'scipy.linalg') if m in sys.modules))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
