@@ -27,7 +27,6 @@ import math
 import statistics
 from collections.abc import Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 __all__ = [
@@ -95,23 +94,17 @@ def model_compiled() -> bool:
 
 
 def _model_compiled() -> bool:
-    """Whether numba's cache holds the DEM kernel already (its index files beside the kernel,
-    or under ``$NUMBA_CACHE_DIR``)."""
-    import os
+    """Whether the compiled DEM kernel is on disk where this process will look for it (the
+    user's cache folder, or ``$NUMBA_CACHE_DIR``; see :mod:`sim_backend.dem.kernel_cache`), or
+    loaded in this process already."""
+    from sim_backend.dem.kernel_cache import kernel_cached_on_disk
 
-    try:
-        import importlib.util
+    if kernel_cached_on_disk():
+        return True
+    import sys
 
-        spec = importlib.util.find_spec("sim_backend.dem.kernel")
-    except (ImportError, ValueError):
-        return True
-    if spec is None or spec.origin is None:
-        return True
-    here = Path(spec.origin).parent
-    places = [here / "__pycache__"]
-    if os.environ.get("NUMBA_CACHE_DIR"):
-        places.append(Path(os.environ["NUMBA_CACHE_DIR"]))
-    return any(any(p.rglob("kernel.*.nbi")) for p in places if p.is_dir())
+    kernel = sys.modules.get("sim_backend.dem.kernel")
+    return bool(kernel is not None and kernel.run_batch.signatures)
 
 
 def _dem_run_s(bench_file: Any) -> float:

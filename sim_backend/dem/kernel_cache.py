@@ -98,10 +98,13 @@ def install_cache_locator() -> None:
 
 
 def kernel_cached_on_disk() -> bool:
-    """Whether a compiled kernel is on disk in :func:`kernel_cache_dir` (cheap; a stale one,
-    from other sources or another numba, still recompiles)."""
+    """Whether a compiled kernel is on disk where this process looks for it: ``$NUMBA_CACHE_DIR``
+    when set, else :func:`kernel_cache_dir` (cheap; a stale one, from other sources or another
+    numba, still recompiles)."""
+    env = os.environ.get("NUMBA_CACHE_DIR")
+    folder = Path(env) if env else kernel_cache_dir()
     try:
-        return any(kernel_cache_dir().rglob("kernel.run_batch-*.nbi"))
+        return any(folder.rglob("kernel.run_batch-*.nbi"))
     except OSError:
         return False
 

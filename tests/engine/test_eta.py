@@ -92,3 +92,22 @@ def test_engine_eta_follows_the_measured_point_times(protocol, bench, out) -> No
     assert progress[-1]["eta_s"] == 0.0
     started = next(e.data for e in events if e.kind == EventKind.RUN_STARTED)
     assert started["estimate_basis"] and started["estimated_s"] > 0
+
+
+def test_model_compiled_looks_where_the_kernel_is_cached(tmp_path, monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """The compiled kernel lives in the user's cache folder ($BIAFC_CACHE_DIR), not beside the
+    sources: a warm folder means no compile in the estimate, an empty one a compile (the
+    estimate said 'compiled first: about 15 s' on every warm run)."""
+    import sys
+
+    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
+    monkeypatch.setenv("BIAFC_CACHE_DIR", str(tmp_path))
+    # this process may have loaded the kernel already: only the disk counts here
+    monkeypatch.delitem(sys.modules, "sim_backend.dem.kernel", raising=False)
+    assert not eta_mod.model_compiled()
+    index = tmp_path / "numba" / "sim_backend" / "dem" / "kernel.run_batch-42.py311.nbi"
+    index.parent.mkdir(parents=True)
+    index.write_bytes(b"")
+    assert eta_mod.model_compiled()
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "elsewhere"))
+    assert not eta_mod.model_compiled()
