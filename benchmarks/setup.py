@@ -1,0 +1,252 @@
+"""No hidden seconds (issue 18): what a command pays before its first result.
+
+- ``build_chain``: the default chain built from scratch (memory caches cleared) in a fresh
+  process, ``BUILDS`` times, with BLAS limited to one thread (``OPENBLAS_NUM_THREADS=1`` and
+  friends) and with the default BLAS threads, while two CPU-bound processes (busy loops, started
+  here) run beside it. Reported: the median and the largest build (s), and the time to import
+  ``sim_backend.dem`` in that process (s). Target: < 0.1 s.
+- the step-stability check of the simulated bench's DEM runs: the smoke protocol's two keys
+  (LTR 0.5 um and 3 um at 200 kS/s, 30 ms, the default integrator with its step-doubling
+  estimate, whose rerun at 2h is the checked step) and the regime's largest drive (4 delta0),
+  in turn, with an empty user cache: per key the check's time (``check_step`` called first, as
+  ``simulate`` does), the run's time (``simulate`` with the estimate, the check then served
+  from memory) and the check as a fraction of that run; then the same check in a new process
+  (memory empty, the verdict on disk). Target: < 5 % of the run.
+- ``run_protocol smoke`` as a subprocess on the simulated bench: cold (an empty cache folder,
+  ``$BIAFC_CACHE_DIR``: the kernel compiles) and warm (the same folder again), the time from the
+  start of the process to its first measured point (the first ``point 1/`` line) and to its
+  exit. Target: warm < 2 s.
+
+Each figure is printed with the host's load average (``os.getloadavg``) at the time.
+"""
+
+from __future__ import annotations
+
+import json
+import multiprocessing
+import os
+import subprocess
+import sys
+import tempfile
+import textwrap
+import time
+from pathlib import Path
+from typing import Any
+
+BUILDS = 7
+BLAS_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS", "BLIS_NUM_THREADS")
+SMOKE_KEYS_M = (0.5e-6, 3.0e-6)  # smoke.yaml's amplitudes (displacement)
+SMOKE_RATE_HZ = 200e3
+DEM_DURATION_S = 30e-3  # the simulated bench's dem_duration_s
+TARGETS = "build_chain < 0.1 s loaded; stability check < 5 % of the run; warm smoke < 2 s"
+
+_BUILD_CODE = textwrap.dedent(
+    """
+    import json, time
+    t0 = time.perf_counter()
+    from sim_backend import dem
+    from sim_backend.dem import chain as chain_mod
+    from sim_backend.dem.threads import blas_threads
+    t_import = time.perf_counter() - t0
+    spec = dem.default_chain_spec()
+    walls = []
+    for _ in range({builds}):
+        chain_mod._CACHE.clear()
+        t0 = time.perf_counter()
+        dem.build_chain(spec)
+        walls.append(time.perf_counter() - t0)
+    print(json.dumps({{"walls": walls, "import_s": t_import, "blas": blas_threads()}}))
+    """
+)
+
+
+def _busy() -> None:  # pragma: no cover - runs in the child
+    x = 0
+    while True:
+        x += 1
+
+
+def _load() -> float:
+    return round(os.getloadavg()[0], 2)
+
+
+def _build_chain_rows() -> list[dict[str, Any]]:
+    ctx = multiprocessing.get_context("spawn")
+    busy = [ctx.Process(target=_busy, daemon=True) for _ in range(2)]
+    for p in busy:
+        p.start()
+    rows = []
+    try:
+        time.sleep(1.0)  # let them take the cores
+        for threads in ("1", "default"):
+            env = dict(os.environ)
+            for var in BLAS_VARS:
+                env.pop(var, None)
+                if threads == "1":
+                    env[var] = "1"
+            out = subprocess.run(
+                [sys.executable, "-c", _BUILD_CODE.format(builds=BUILDS)],
+                env=env, capture_output=True, text=True, check=True, timeout=600,
+            )  # fmt: skip
+            got = json.loads(out.stdout.strip().splitlines()[-1])
+            walls = sorted(got["walls"])
+            rows.append(
+                {
+                    "what": f"build_chain, BLAS threads {threads}",
+                    "blas_threads": ",".join(str(n) for n in got["blas"]),
+                    "median_s": walls[len(walls) // 2],
+                    "max_s": walls[-1],
+                    "import_dem_s": got["import_s"],
+                    "busy_processes": len(busy),
+                    "load_1min": _load(),
+                }
+            )
+    finally:
+        for p in busy:
+            p.terminate()
+        for p in busy:
+            p.join()
+    return rows
+
+
+_CHECK_CODE = textwrap.dedent(
+    """
+    import json, time
+    from instruments.burst import Burst
+    from sim_backend import dem
+    from sim_backend.dem import step_limit
+    chain = dem.build_chain(dem.default_chain_spec())
+    out = []
+    for a, h in {keys!r}:
+        d = dem.Drive("ltr", "displacement", a, burst=Burst(8.92e3))
+        t0 = time.perf_counter()
+        step_limit.check_step(chain, "blanes-moan4", h, [d])
+        out.append(time.perf_counter() - t0)
+    print(json.dumps(out))
+    """
+)
+
+
+def _stability_rows(cache: Path) -> list[dict[str, Any]]:
+    from instruments.burst import Burst
+    from sim_backend import dem
+    from sim_backend.dem import step_limit
+
+    chain = dem.build_chain(dem.default_chain_spec())
+    amplitudes = [*SMOKE_KEYS_M, 4.0 * chain.delta0_m]
+    # warm the kernel (compiled or loaded) before timing runs
+    dem.simulate(chain, [dem.Drive("ltr", "displacement", 1e-7, burst=Burst(8.92e3))],
+                 duration_s=1e-4, sample_rate_Hz=SMOKE_RATE_HZ)  # fmt: skip
+    for name in ("_RANGE_CACHE", "_STABLE_CACHE", "_LIMIT_CACHE"):
+        getattr(step_limit, name).clear()
+    rows = []
+    keys = []
+    for a in amplitudes:
+        drive = dem.Drive("ltr", "displacement", float(a), burst=Burst(8.92e3))
+        probe = dem.simulate(chain, [drive], duration_s=1e-4, sample_rate_Hz=SMOKE_RATE_HZ,
+                             record=())  # fmt: skip
+        h2 = 2.0 * float(probe.meta["dt_s"])  # the step of the error estimate's rerun
+        keys.append((float(a), h2))
+        t0 = time.perf_counter()
+        step_limit.check_step(chain, "blanes-moan4", h2, [drive])
+        check_s = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        dem.simulate(chain, [drive], duration_s=DEM_DURATION_S, sample_rate_Hz=SMOKE_RATE_HZ,
+                     error_estimate=True)  # fmt: skip
+        run_s = time.perf_counter() - t0
+        rows.append(
+            {
+                "what": f"stability check, key ltr {a * 1e6:.3g} um (first process)",
+                "check_s": check_s,
+                "run_s": run_s,
+                "check_of_run": check_s / run_s,
+                "load_1min": _load(),
+            }
+        )
+    env = dict(os.environ, BIAFC_CACHE_DIR=str(cache))
+    out = subprocess.run(
+        [sys.executable, "-c", _CHECK_CODE.format(keys=keys)],
+        env=env, capture_output=True, text=True, check=True, timeout=600,
+    )  # fmt: skip
+    for (a, _), check_s, row in zip(keys, json.loads(out.stdout.strip()), list(rows), strict=True):
+        rows.append(
+            {
+                "what": f"stability check, key ltr {a * 1e6:.3g} um (new process, verdict on disk)",
+                "check_s": check_s,
+                "run_s": row["run_s"],
+                "check_of_run": check_s / row["run_s"],
+                "load_1min": _load(),
+            }
+        )
+    return rows
+
+
+def _smoke(cache: Path, out: Path, label: str) -> dict[str, Any]:
+    env = dict(os.environ, BIAFC_CACHE_DIR=str(cache))
+    for var in ("NUMBA_CACHE_DIR", "NUMBA_CACHE_LOCATOR_CLASSES"):
+        env.pop(var, None)
+    load = _load()
+    t0 = time.perf_counter()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "daq.cli.run_protocol", "smoke", "--out", str(out)],
+        env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+    )  # fmt: skip
+    first = None
+    lines = []
+    assert proc.stdout is not None
+    for line in proc.stdout:
+        lines.append(line.rstrip())
+        if first is None and line.lstrip().startswith("point 1/"):
+            first = time.perf_counter() - t0
+    rc = proc.wait()
+    total = time.perf_counter() - t0
+    if rc != 0:
+        raise RuntimeError(f"run_protocol smoke ({label}) exited {rc}: " + " | ".join(lines[-5:]))
+    return {
+        "what": f"run_protocol smoke, {label}",
+        "first_point_s": first if first is not None else float("nan"),
+        "total_s": total,
+        "load_1min": load,
+    }
+
+
+def run() -> dict[str, Any]:
+    table: list[dict[str, Any]] = []
+    table += _build_chain_rows()
+    import sim_backend.dem.kernel  # noqa: F401  (its compiled cache stays the user's)
+
+    with tempfile.TemporaryDirectory(prefix="biafc-setup-") as tmp:
+        cache = Path(tmp) / "cache"
+        old = os.environ.get("BIAFC_CACHE_DIR")
+        os.environ["BIAFC_CACHE_DIR"] = str(cache)  # the stability verdicts go to an empty folder
+        try:
+            table += _stability_rows(cache)
+        finally:
+            if old is None:
+                os.environ.pop("BIAFC_CACHE_DIR", None)
+            else:
+                os.environ["BIAFC_CACHE_DIR"] = old
+        smoke_cache = Path(tmp) / "smoke-cache"
+        cold = _smoke(smoke_cache, Path(tmp) / "cold.h5", "cold (empty cache folder)")
+        warm = _smoke(smoke_cache, Path(tmp) / "warm.h5", "warm (the same folder again)")
+        table += [cold, warm]
+    builds = [r for r in table if r["what"].startswith("build_chain")]
+    checks = [r for r in table if "first process" in r["what"]]
+    out: dict[str, Any] = {
+        "build_chain_1_thread_s": builds[0]["median_s"],
+        "build_chain_default_threads_s": builds[1]["median_s"],
+        "build_chain_max_s": max(r["max_s"] for r in builds),
+        "import_dem_s": max(r["import_dem_s"] for r in builds),
+        "stability_check_first_key_s": checks[0]["check_s"],
+        "stability_check_max_of_run": max(r["check_of_run"] for r in checks),
+        "stability_checks_of_runs": sum(r["check_s"] for r in checks)
+        / sum(r["run_s"] for r in checks),
+        "smoke_cold_first_point_s": cold["first_point_s"],
+        "smoke_cold_s": cold["total_s"],
+        "smoke_warm_first_point_s": warm["first_point_s"],
+        "smoke_warm_s": warm["total_s"],
+        "load_1min_end": _load(),
+        "targets": TARGETS,
+        "table": table,
+    }
+    return out
