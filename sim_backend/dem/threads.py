@@ -25,9 +25,12 @@ _DEPTH = 0
 def _controller() -> Any:
     global _CONTROLLER
     if _CONTROLLER is None:
+        # scipy's wheels bring their own BLAS, loaded with scipy.linalg: load it first, so that
+        # the controller, which inspects the loaded libraries once, limits it too
+        import scipy.linalg  # noqa: F401
         from threadpoolctl import ThreadpoolController
 
-        _CONTROLLER = ThreadpoolController()  # inspects the loaded libraries once
+        _CONTROLLER = ThreadpoolController()
     return _CONTROLLER
 
 

@@ -282,3 +282,33 @@ def test_importing_the_model_leaves_scipy_solvers_unimported() -> None:
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
+
+
+def test_one_blas_thread_limits_scipys_blas_loaded_after_the_model() -> None:
+    """scipy.linalg (and the BLAS its wheels bundle) is imported on the model's first linear
+    algebra, not with sim_backend.dem: the limit must cover it all the same (in a fresh process,
+    where nothing imported scipy.linalg before; it ran scipy's BLAS on 2 threads)."""
+    import json
+    import subprocess
+    import sys
+
+    code = (
+        "import json\n"
+        "from sim_backend import dem\n"
+        "from sim_backend.dem import simulation\n"
+        "from sim_backend.dem.threads import blas_threads\n"
+        "from threadpoolctl import threadpool_limits\n"
+        "seen = []\n"
+        "eigh = simulation.eigh\n"
+        "def spy(a, b):\n"
+        "    seen.append(blas_threads())\n"
+        "    return eigh(a, b)\n"
+        "simulation.eigh = spy\n"
+        "chain = dem.build_chain(dem.default_chain_spec())\n"
+        "with threadpool_limits(2, user_api='blas'):\n"
+        "    simulation.block_modes(chain)\n"
+        "print(json.dumps(seen))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    seen = json.loads(out.stdout)
+    assert seen and all(n == [1] * len(n) and n for n in seen), seen
