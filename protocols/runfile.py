@@ -63,6 +63,7 @@ import h5py
 import numpy as np
 from numpy.typing import NDArray
 
+from protocols.hdf5probe import HDF5ProbeError, probe_hdf5
 from protocols.recover import ClearedView, has_consistency_flags
 
 __all__ = [
@@ -429,7 +430,21 @@ class RunFileWriter:
 def open_for_reading(path: str | Path) -> Iterator[h5py.File]:
     """Open a run file read-only: through SWMR (also one being written), or, for a file whose
     writer was killed outside SWMR (while closing), through a view with the consistency
-    flags cleared. The file is never changed."""
+    flags cleared. The file is never changed. A path that is no whole HDF5 file (a folder,
+    empty, no signature, truncated) is a :class:`RunFileError` (one line) before h5py sees it.
+
+    SWMR is used only for a file a writer holds (consistency flags set): HDF5's SWMR reader
+    retries a metadata read that fails its checksum for minutes (right while a writer flushes,
+    but a hang on a damaged or truncated file), while a plain read fails at once. A closed file
+    is read without HDF5's file lock, so a reader never stops a writer from resuming it."""
+    try:
+        header = probe_hdf5(path)
+    except HDF5ProbeError as exc:
+        raise RunFileError(str(exc)) from None
+    if header.flags == 0:
+        with h5py.File(path, "r", locking=False) as g:
+            yield g
+        return
     try:
         f = h5py.File(path, "r", swmr=True)
     except OSError:
@@ -517,8 +532,8 @@ def _check_format(path: Path) -> None:
         with open_for_reading(path) as f:
             fmt = f.attrs.get("format")
             ver = f.attrs.get("format_version")
-    except OSError as exc:
-        raise RunFileError(f"{path} is not a readable HDF5 file ({exc})") from exc
+    except (OSError, RuntimeError, KeyError) as exc:
+        raise RunFileError(_damaged(path, exc)) from None
     if fmt != FORMAT:
         raise RunFileError(f"{path} is not a biafc run file (format={fmt!r})")
     if int(ver) != FORMAT_VERSION:
@@ -552,9 +567,24 @@ def stored_texts(path: str | Path) -> tuple[str, str]:
 
 
 def read_run(path: str | Path) -> RunData:
-    """Read a whole run file (also one still being written, through SWMR)."""
+    """Read a whole run file (also one still being written, through SWMR). A file that is no
+    run file, or one damaged inside, is a :class:`RunFileError` (one line)."""
     path = Path(path)
     _check_format(path)
+    try:
+        return _read_run(path)
+    except (OSError, RuntimeError, KeyError, ValueError, TypeError) as exc:
+        if isinstance(exc, RunFileError):
+            raise
+        raise RunFileError(_damaged(path, exc)) from None
+
+
+def _damaged(path: Path, exc: BaseException) -> str:
+    why = (str(exc).strip("'\"").splitlines() or [type(exc).__name__])[0]
+    return f"{path}: damaged HDF5 file, cannot be read ({why})"
+
+
+def _read_run(path: Path) -> RunData:
     with open_for_reading(path) as f:
         attrs = _attr_dict(f)
         snapshot = json.loads(f["snapshot"].attrs.get("json", "{}"))

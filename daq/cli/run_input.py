@@ -20,8 +20,11 @@ def read_run_file(path: Path) -> Any:
         raise CliError(f"run file {path} does not exist")
     try:
         data = read_run(path)
-    except (RunFileError, OSError, KeyError) as exc:
-        raise CliError(f"{path}: cannot read as a run file ({exc})") from exc
+    except RunFileError as exc:  # names the file and what is wrong with it
+        raise CliError(str(exc)) from None
+    except (OSError, KeyError) as exc:
+        why = (str(exc).splitlines() or [type(exc).__name__])[0]
+        raise CliError(f"{path}: cannot read as a run file ({why})") from None
     if not data.scans:
         raise CliError(f"{path}: the run file holds no scan")
     return data

@@ -63,7 +63,7 @@ def _run_status(path: Path) -> str | None:
             if f.attrs.get("format") != FORMAT:
                 return None
             status = f.attrs.get("status", "")
-    except (OSError, ValueError):
+    except (OSError, ValueError, KeyError, RuntimeError):  # h5py's errors of a damaged file
         return None
     return status.decode() if isinstance(status, bytes) else str(status)
 

@@ -74,6 +74,17 @@ def head(
     return make
 
 
+def damaged(name: str, start: int, stop: int) -> Callable[[Sources], bytes]:
+    """The source ``name`` with bytes ``start:stop`` overwritten (its length unchanged)."""
+
+    def make(sources: Sources) -> bytes:
+        data = bytearray(sources[name])
+        data[start:stop] = b"\xaa" * (stop - start)
+        return bytes(data)
+
+    return make
+
+
 def source(name: str) -> Callable[[Sources], bytes]:
     return lambda sources: sources[name]
 
@@ -132,22 +143,40 @@ CASES: tuple[Case, ...] = (
     Case("chain_laughs", 'chain file "billion laughs"', (*SIMULATE, "--chain", "chain.yaml"),
          ("chain.yaml", "aliases"), {"chain.yaml": LAUGHS}),
     # -- run files: biafc figures, --resume ----------------------------------------------------
+    Case("figures_1kB", "biafc figures on the first 1 kB of a run file",
+         ("biafc", "figures", "cut.h5", "--out", "figs"), ("cut.h5", "truncated"),
+         {"cut.h5": head("run_file", n=1024)}),
     Case("figures_half", "biafc figures on half a run file",
          ("biafc", "figures", "cut.h5", "--out", "figs"), ("cut.h5", "truncated"),
-         {"cut.h5": head("run_file", fraction=0.5)}, pending=PENDING_BOUNDS),
+         {"cut.h5": head("run_file", fraction=0.5)}),
+    Case("figures_damaged", "biafc figures on a run file with bytes 100-600 overwritten",
+         ("biafc", "figures", "bad.h5", "--out", "figs"), ("bad.h5", "damaged"),
+         {"bad.h5": damaged("run_file", 100, 600)}),
     Case("figures_text", "biafc figures on a text file",
          ("biafc", "figures", "notes.h5", "--out", "figs"), ("notes.h5", "not an HDF5 file"),
-         {"notes.h5": "a text file\n"}, pending=PENDING_BOUNDS),
+         {"notes.h5": "a text file\n"}),
     Case("figures_empty", "biafc figures on an empty file",
          ("biafc", "figures", "empty.h5", "--out", "figs"), ("empty.h5", "empty file"),
-         {"empty.h5": b""}, pending=PENDING_BOUNDS),
+         {"empty.h5": b""}),
     Case("figures_folder", "biafc figures on a folder", ("biafc", "figures", "."),
-         ("folder",), pending=PENDING_BOUNDS),
+         ("folder",)),
     Case("figures_other_hdf5", "biafc figures on an HDF5 file that is not a run file",
          ("biafc", "figures", "other.h5", "--out", "figs"), ("other.h5", "not a biafc run"),
          {"other.h5": source("other_hdf5")}),
     Case("resume_text", "--resume of a text file", ("run_protocol", "--resume", "notes.h5"),
-         ("notes.h5", "not an HDF5 file"), {"notes.h5": "a text file\n"}, pending=PENDING_BOUNDS),
+         ("notes.h5", "not an HDF5 file"), {"notes.h5": "a text file\n"}),
+    Case("resume_1kB", "--resume of the first 1 kB of a run file",
+         ("run_protocol", "--resume", "cut.h5"), ("cut.h5", "truncated"),
+         {"cut.h5": head("run_file", n=1024)}),
+    Case("resume_half_with_protocol", "--resume of half a run file, protocol given",
+         ("run_protocol", "proto.yaml", "--resume", "cut.h5"), ("cut.h5", "truncated"),
+         {"proto.yaml": SMOKE, "cut.h5": head("run_file", fraction=0.5)}),
+    Case("resume_damaged", "--resume of a run file with bytes 100-600 overwritten",
+         ("run_protocol", "--resume", "bad.h5"), ("bad.h5", "damaged"),
+         {"bad.h5": damaged("run_file", 100, 600)}),
+    Case("out_existing_truncated", "--out naming the first 1 kB of a run file",
+         ("run_protocol", "proto.yaml", "--out", "cut.h5"), ("cut.h5", "not a run file"),
+         {"proto.yaml": SMOKE, "cut.h5": head("run_file", n=1024)}),
     Case("resume_folder", "--resume .", ("run_protocol", "--resume", "."),
          ("is a folder", "run file")),
     Case("resume_complete", "--resume of a complete run file",
