@@ -70,11 +70,14 @@ def _description(name: str) -> str:
 
 
 def is_study_file(path: str | Path) -> bool:
-    """Whether ``path`` is an HDF5 study output."""
+    """Whether ``path`` is an HDF5 study output (False for anything else, damaged included)."""
+    from protocols.hdf5probe import HDF5ProbeError, probe_hdf5
+
     try:
+        probe_hdf5(path)
         with h5py.File(path, "r") as f:
             return bool(f.attrs.get("format") == FORMAT)
-    except (OSError, ValueError):
+    except (OSError, ValueError, KeyError, RuntimeError, HDF5ProbeError):
         return False
 
 
