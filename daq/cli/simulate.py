@@ -175,6 +175,8 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if args.lean and (dt is not None or args.integrator != "default"):
         raise CliError("--lean picks the model itself; drop --dt and --integrator")
+    if dt is not None and not args.lean:
+        _check_step(chain, drive, args.integrator, dt, rate)
     progress = _stages(args, chain, duration, dt)
     try:
         if args.lean:
@@ -254,6 +256,42 @@ def run(args: argparse.Namespace) -> int:
         f"{math.sqrt(float(sweep.transmission[0])):.4g}"
     )
     return 0
+
+
+def _check_step(chain: Any, drive: Any, integrator: str, dt: float, rate: float) -> None:
+    """Refuse a ``--dt`` the model would not run at: one above the chain's stability limit for
+    the integrator (:mod:`sim_backend.dem.step_limit`), or one coarser than the record period
+    (the model steps a whole number of times per sample, so it would silently step at the
+    period). A finer stable step is honoured (as the largest ``period / n <= dt``)."""
+    from instruments.units import format_quantity
+    from sim_backend.dem.simulation import DEFAULT_INTEGRATOR
+    from sim_backend.dem.step_limit import (
+        largest_stable_step,
+        reference_overlap_m,
+        stable_up_to,
+    )
+
+    period = 1.0 / rate
+    if dt <= period:
+        return  # the model's own check refuses an unstable step (StepTooLargeError)
+    name = DEFAULT_INTEGRATOR if integrator == "default" else integrator
+    overlap = reference_overlap_m(chain, [drive])
+    given = format_quantity(dt, "time")
+    if not stable_up_to(chain, name, dt, overlap):
+        lim = largest_stable_step(chain, name, overlap)
+        use = format_quantity(min(lim.h_max_s, period), "time")
+        if period < lim.h_max_s:
+            use += f" (the record period at --rate {format_quantity(rate, 'sample_rate')})"
+        raise CliError(
+            f"--dt {given}: unstable on this chain, whose stability limit for {name} is "
+            f"{format_quantity(lim.h_max_s, 'time')} (linearised step map); use --dt <= {use}"
+        )
+    raise CliError(
+        f"--dt {given}: stable on this chain but coarser than the record period "
+        f"{format_quantity(period, 'time')} (--rate {format_quantity(rate, 'sample_rate')}), "
+        "and the model steps at least once per sample; use --dt <= "
+        f"{format_quantity(period, 'time')}, or a lower --rate"
+    )
 
 
 def _stages(args: argparse.Namespace, chain: Any, duration: float, dt: float | None) -> Any:

@@ -187,9 +187,11 @@ CASES: tuple[Case, ...] = (
          {"other.h5": source("other_hdf5")}),
     # -- biafc simulate -------------------------------------------------------------------------
     Case("simulate_dt_50us", "biafc simulate --dt '50 us' (unstable)",
-         (*SIMULATE, "--dt", "50 us"), ("--dt", "stability limit"), pending=PENDING_BOUNDS),
+         (*SIMULATE, "--dt", "50 us"), ("--dt", "stability limit")),
     Case("simulate_dt_1s", "biafc simulate --dt '1 s'", (*SIMULATE, "--dt", "1 s"),
-         ("--dt", "stability limit"), pending=PENDING_BOUNDS),
+         ("--dt", "stability limit")),
+    Case("simulate_dt_coarse", "biafc simulate --dt '5 us' (stable, coarser than a sample)",
+         (*SIMULATE, "--dt", "5 us"), ("--dt", "record period")),
     # -- protocol fields (the validation layer) ---------------------------------------------
     _p("cylinders_empty", "cylinders: []", "cylinders: [1, 8, 16]", "cylinders: []",
        ("proto.yaml", "cylinders")),

@@ -113,3 +113,14 @@ def test_far_end_peak_is_the_same_in_simulate_and_figures(
     assert "f_out: far-end output peak" in figures_text
     row = json.loads((tmp_path / "fig" / "summary.json").read_text())["rows"][0]
     assert float(m.group(1)) == pytest.approx(row["output_Hz"] / 1e3, abs=5e-4)
+
+
+def test_simulate_honours_a_stable_step_finer_than_a_sample(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``--dt '1 us'`` runs at 1 us; coarser steps are refused (tests/bad_inputs, issue 16)."""
+    out = tmp_path / "fine.h5"
+    argv = ["simulate", "--direction", "ltr", "--amplitude", "1 um", "--duration", "1 ms",
+            "--dt", "1 us", "--no-error-estimate", "--out", str(out)]  # fmt: skip
+    assert main(argv) == 0
+    assert read_run(out).simulation["dt_s"] == pytest.approx(1e-6)
