@@ -39,8 +39,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--amplitude",
-        default="0.2 V",
-        help="generator amplitude of the burst, peak to peak, with its unit (default '0.2 V')",
+        default="0.2 Vpp",
+        help="generator amplitude of the burst, peak to peak (Vpp) or peak (Vpk) "
+        "(default '0.2 Vpp')",
     )
 
 
@@ -67,8 +68,9 @@ def run(args: argparse.Namespace) -> int:
     from daq import preflight
     from daq.connect import connect_bench
     from instruments.errors import InstrumentError
-    from instruments.units import UnitError, parse_quantity
+    from instruments.units import UnitError
     from protocols.bench import default_bench_path, load_bench
+    from protocols.schema import parse_amplitude
     from protocols.yamlfile import ConfigError
 
     try:
@@ -78,9 +80,13 @@ def run(args: argparse.Namespace) -> int:
     test = None
     if args.move:
         try:
-            vpp = parse_quantity(args.amplitude, "voltage", field="--amplitude")
+            kind, vpp = parse_amplitude(args.amplitude)  # as a protocol's: Vpp or Vpk
         except UnitError as exc:
-            raise CliError(str(exc)) from None
+            raise CliError(f"--amplitude: {exc}") from None
+        if kind != "generator_Vpp":
+            raise CliError(
+                f"--amplitude {args.amplitude!r}: give generator volts, e.g. '0.2 Vpp' or '0.1 Vpk'"
+            )
         f_c = 8.92e3 if args.direction == "ltr" else 6.63e3
         test = preflight.BurstTest(args.direction, args.cylinder, f_c, amplitude_Vpp=vpp)
         why = bf.bench.amplitude_limit_error(vpp)

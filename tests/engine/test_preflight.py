@@ -104,8 +104,10 @@ def test_check_move_fires_one_burst_and_leaves_the_bench_safe(
     ("args", "message"),
     [
         (["check", "no_such_bench.yaml"], "no_such_bench.yaml"),
-        (["check", "--move", "--amplitude", "20 V"], "above the generator limit"),
+        (["check", "--move", "--amplitude", "20 Vpp"], "above the generator limit"),
         (["check", "--move", "--amplitude", "2"], "--amplitude"),
+        (["check", "--move", "--amplitude", "0.2 V"], "(0.2 Vpp) or peak (0.2 Vpk)"),
+        (["check", "--move", "--amplitude", "1 um"], "give generator volts"),
         (["check", "--move", "--cylinder", "32"], "choose 1..31"),
     ],
 )
