@@ -80,10 +80,10 @@ def run(args: argparse.Namespace) -> int:
     test = None
     if args.move:
         try:
-            kind, vpp = parse_amplitude(args.amplitude)  # as a protocol's: Vpp or Vpk
+            drive, vpp = parse_amplitude(args.amplitude)  # as a protocol's: Vpp or Vpk
         except UnitError as exc:
             raise CliError(f"--amplitude: {exc}") from None
-        if kind != "generator_Vpp":
+        if drive != "generator_Vpp":
             raise CliError(
                 f"--amplitude {args.amplitude!r}: give generator volts, e.g. '0.2 Vpp' or '0.1 Vpk'"
             )
