@@ -47,6 +47,10 @@ def _per_volt(value: Any, dimension: str) -> float:
 SERIAL_BAUD_DEFAULT = 115200
 
 
+#: stage positions (soft limits, simulated travel) within this of the origin (m)
+TRAVEL_BOUND_M = 5.0
+
+
 def _in_range(
     value: float, low: float, high: float, dimension: str, low_open: bool = True, suffix: str = ""
 ) -> float:
@@ -166,6 +170,13 @@ class StageSpec(_Model):
     timeout: Duration = 60.0
     baud_rate: int = Field(default=SERIAL_BAUD_DEFAULT, gt=0)
 
+    @field_validator("soft_limits")
+    @classmethod
+    def _soft_limits(cls, v: tuple[float, float]) -> tuple[float, float]:
+        lo, hi = (_in_range(x, -TRAVEL_BOUND_M, TRAVEL_BOUND_M, "length", low_open=False)
+                  for x in v)  # fmt: skip
+        return lo, hi
+
     @field_validator("speed")
     @classmethod
     def _speed(cls, v: float) -> float:
@@ -248,6 +259,45 @@ class SimulationSpec(_Model):
     dem_duration: Duration = 30.0e-3
     dem_integrator: str = "default"
     faults: dict[str, Any] = Field(default_factory=dict)
+
+    @field_validator("speedup")
+    @classmethod
+    def _speedup(cls, v: float) -> float:
+        return _in_range(v, 0.0, 1.0e6, "", low_open=False)
+
+    @field_validator("spot_tolerance")
+    @classmethod
+    def _spot_tolerance(cls, v: float) -> float:
+        return _in_range(v, 0.0, 0.1, "length")
+
+    @field_validator("stage_travel")
+    @classmethod
+    def _stage_travel(cls, v: tuple[float, float]) -> tuple[float, float]:
+        lo, hi = (_in_range(x, -TRAVEL_BOUND_M, TRAVEL_BOUND_M, "length", low_open=False)
+                  for x in v)  # fmt: skip
+        if not lo < hi:
+            raise ValueError("give [low, high] with low < high")
+        return lo, hi
+
+    @field_validator("vibrometer_full_scale")
+    @classmethod
+    def _full_scale(cls, v: float) -> float:
+        return _in_range(v, 0.0, 100.0, "voltage")
+
+    @field_validator("vibrometer_noise")
+    @classmethod
+    def _vibrometer_noise(cls, v: float) -> float:
+        return _in_range(v, 0.0, 10.0, "velocity", low_open=False)
+
+    @field_validator("digitiser_noise")
+    @classmethod
+    def _digitiser_noise(cls, v: float) -> float:
+        return _in_range(v, 0.0, 10.0, "voltage", low_open=False)
+
+    @field_validator("dem_duration")
+    @classmethod
+    def _dem_duration(cls, v: float) -> float:
+        return _in_range(v, 0.0, 10.0, "time")
 
 
 class BenchSpec(_Model):

@@ -143,10 +143,11 @@ def run(args: argparse.Namespace) -> int:
             raise CliError(f"--{name} applies only to a study output")
     if args.fix or args.where:
         raise CliError("--fix and --where apply only to a study output")
-    from analysis.report import write_figures
     from daq.cli.run_input import read_run_file
 
-    data = read_run_file(path)
+    data = read_run_file(path)  # before matplotlib is imported: a refusal comes at once
+    from analysis.report import write_figures
+
     out = args.out or path.with_name(f"{path.stem}_figures")
     try:
         report = write_figures(data, out)

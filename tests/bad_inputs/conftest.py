@@ -50,6 +50,8 @@ def sources(tmp_path_factory: pytest.TempPathFactory) -> dict[str, bytes]:
 def warm_imports() -> None:
     """Import the commands' modules once, so that the 2 s bound times the refusal, not the
     first import of numba or matplotlib in this process."""
-    import daq.cli.figures
-    import daq.cli.run_protocol
-    import daq.cli.simulate  # noqa: F401
+    import importlib
+
+    for name in ("daq.cli.figures", "daq.cli.run_input", "daq.cli.run_protocol",
+                 "daq.cli.simulate", "protocols.studyfile"):  # fmt: skip
+        importlib.import_module(name)
