@@ -31,6 +31,7 @@ __all__ = [
     "MAX_DEPTH",
     "MAX_NODES",
     "ConfigError",
+    "InputBoundError",
     "YamlDoc",
     "load_yaml",
     "parse_yaml",
@@ -53,6 +54,11 @@ Path_ = tuple[str | int, ...]
 
 class ConfigError(ValueError):
     """A protocol or bench file is malformed or invalid; the message is one line."""
+
+
+class InputBoundError(ConfigError):
+    """A settings text breaks a bound of this loader (size, nesting, values, aliases) or one
+    of its rules (merge keys, keys that are not scalars); the message is one line."""
 
 
 @dataclass
@@ -184,18 +190,18 @@ def parse_yaml(text: str, source: str = "<string>") -> YamlDoc:
     ``SOURCE:LINE: malformed YAML: ...``, a broken bound ``SOURCE:LINE: what, the bound``."""
     size = len(text.encode("utf-8", "surrogatepass"))
     if size > MAX_BYTES:
-        raise ConfigError(_too_big(source, size))
+        raise InputBoundError(_too_big(source, size))
     loader = _BoundedComposer(text)
     try:
         node = loader.get_single_node()
     except _Refused as exc:
-        raise ConfigError(f"{source}:{exc.line}: {exc}") from None
+        raise InputBoundError(f"{source}:{exc.line}: {exc}") from None
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         line = mark.line + 1 if mark is not None else 1
         problem = (exc.problem or exc.context or "syntax error").strip()
         if "nesting depth" in problem:  # libyaml's own bound (1000), met while looking ahead
-            raise ConfigError(f"{source}:{line}: {_too_deep()}") from None
+            raise InputBoundError(f"{source}:{line}: {_too_deep()}") from None
         raise ConfigError(f"{source}:{line}: malformed YAML: {problem}") from None
     except yaml.YAMLError as exc:
         first = str(exc).splitlines()[0]
@@ -208,7 +214,7 @@ def parse_yaml(text: str, source: str = "<string>") -> YamlDoc:
     try:
         data = _build(node, (), lines, SafeConstructor())
     except _Refused as exc:
-        raise ConfigError(f"{source}:{exc.line}: {exc}") from None
+        raise InputBoundError(f"{source}:{exc.line}: {exc}") from None
     except ConfigError as exc:
         raise ConfigError(f"{source}:{node.start_mark.line + 1}: {exc}") from None
     except yaml.MarkedYAMLError as exc:
@@ -241,7 +247,7 @@ def read_yaml_text(path: str | Path) -> str:
             raw = f.read(MAX_BYTES + 1)
             if len(raw) > MAX_BYTES:
                 size = max(os.fstat(f.fileno()).st_size, len(raw))
-                raise ConfigError(_too_big(str(p), size))
+                raise InputBoundError(_too_big(str(p), size))
     except OSError as exc:
         if p.is_dir():
             raise ConfigError(f"{p}: is a folder, not a file") from None

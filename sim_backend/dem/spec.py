@@ -350,6 +350,19 @@ def _raw_chain_dict(path: str | Path | None) -> tuple[dict[str, Any], str]:
     return data, str(p)
 
 
+def _setting_value(text: str, source: str) -> Any:
+    """The value of one ``KEY=VALUE`` read as YAML by the bounded loader (no alias expansion
+    beyond its bound); text that is not YAML stays text."""
+    from protocols.yamlfile import ConfigError, InputBoundError, parse_yaml
+
+    try:
+        return parse_yaml(text, source).data
+    except InputBoundError as exc:
+        raise ChainFileError(str(exc)) from None
+    except ConfigError:
+        return text.strip()
+
+
 def apply_settings(
     data: dict[str, Any], settings: list[str] | tuple[str, ...], source: str = "--set"
 ) -> dict[str, Any]:
@@ -363,10 +376,7 @@ def apply_settings(
         key = key.strip()
         if not sep or not key or not text.strip():
             raise ChainFileError(f"{source} {item!r}: write KEY=VALUE, e.g. diameter=12mm")
-        try:
-            value = yaml.safe_load(text)
-        except yaml.YAMLError:
-            value = text.strip()
+        value = _setting_value(text, f"{source} {key}")
         parts = key.split(".")
         target = out
         for part in parts[:-1]:

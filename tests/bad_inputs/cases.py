@@ -94,6 +94,11 @@ DEEP = "a: " + "[" * 5000 + "]" * 5000 + "\n"
 LAUGHS = "a0: &a0 [lol, lol, lol, lol, lol, lol, lol, lol, lol]\n" + "".join(
     f"a{i}: &a{i} [{', '.join([f'*a{i - 1}'] * 9)}]\n" for i in range(1, 10)
 )
+FLOW_LAUGHS = (
+    "{a0: &a0 [l, l, l, l, l, l, l, l, l], "
+    + ", ".join(f"a{i}: &a{i} [{', '.join([f'*a{i - 1}'] * 9)}]" for i in range(1, 10))
+    + "}"
+)
 BIG = SMOKE + ("#" + " padding" * 12 + "\n") * 12_000  # about 1.2 MB of comments
 
 RUN = ("run_protocol", "proto.yaml", "--out", "run.h5")
@@ -142,6 +147,14 @@ CASES: tuple[Case, ...] = (
          ("chain.yaml", "deeper than"), {"chain.yaml": DEEP}),
     Case("chain_laughs", 'chain file "billion laughs"', (*SIMULATE, "--chain", "chain.yaml"),
          ("chain.yaml", "aliases"), {"chain.yaml": LAUGHS}),
+    Case("study_binary", "study file of binary garbage (biafc study)",
+         ("biafc", "study", "study.yaml", "--out", "study.h5"), ("study.yaml", "not a text file"),
+         {"study.yaml": GARBAGE}),
+    Case("study_laughs", 'study file "billion laughs"',
+         ("biafc", "study", "study.yaml", "--out", "study.h5"), ("study.yaml", "aliases"),
+         {"study.yaml": LAUGHS}),
+    Case("set_laughs", 'biafc simulate --set with a "billion laughs" value',
+         (*SIMULATE, "--set", f"lengths={FLOW_LAUGHS}"), ("--set", "aliases")),
     # -- run files: biafc figures, --resume ----------------------------------------------------
     Case("figures_1kB", "biafc figures on the first 1 kB of a run file",
          ("biafc", "figures", "cut.h5", "--out", "figs"), ("cut.h5", "truncated"),

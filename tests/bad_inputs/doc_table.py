@@ -24,6 +24,9 @@ END = "<!-- end of bad-inputs table -->"
 
 
 def _cell(text: str) -> str:
+    """A table cell: no pipe, no line break, and no path of this machine (files of the
+    installation are named relative to it)."""
+    text = text.replace(str(REPO) + "/", "")
     return text.replace("|", "\\|").replace("\n", " ")
 
 
