@@ -102,3 +102,27 @@ def test_the_shipped_studies_load_and_the_example_is_small() -> None:
         assert cell_table(load_study(name).study).n_cells > 0
     example = load_study("example").study
     assert cell_table(example).n_cells <= 100 and example.simulation.duration <= 10e-3
+
+
+def test_a_latin_hypercube_study_is_binned_on_its_map(tmp_path: Path) -> None:
+    text = (
+        TINY.replace("sampling: grid", "sampling: {latin_hypercube: 80, seed: 1}")
+        .replace("{from: 12 mm, to: 15 mm, count: 3}", "{from: 12 mm, to: 15 mm}")
+        .replace("[3 N, 6 N]", "{from: 3 N, to: 6 N}")
+        .replace("amplitudes: [0.5 um, 2 um]", "amplitudes: [2 um]")
+        .replace("cells_per_task: 3", "cells_per_task: 40")
+        .replace("error_estimate: true", "error_estimate: false")
+    )
+    study = tmp_path / "lhs.yaml"
+    study.write_text(text)
+    out = tmp_path / "lhs.h5"
+    assert main(["study", str(study), "--workers", "0", "--out", str(out), "-q"]) == 0
+    data = read_study(out)
+    pm = phase_map(data, "transmission_ltr", "diameter", "preload", bins=4)
+    assert pm.values.shape == (4, 4) and pm.cells == 80
+    assert pm.x[0] > 12e-3 and pm.x[-1] < 15e-3  # bin centres
+    d, f = data.parameters["diameter"], data.parameters["preload"]
+    first = (d < 12.75e-3) & (f < 3.75)  # the lowest bin of each axis
+    assert pm.values[0, 0] == pytest.approx(np.mean(data.metrics["transmission_ltr"][first]))
+    with pytest.raises(ValueError, match="sampled, not a grid"):
+        phase_map(data, "transmission_ltr", "diameter", "n_cylinders", fixed={"preload": 4.0})
