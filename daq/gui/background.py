@@ -48,7 +48,12 @@ class BackgroundCall(QObject):
         self.done.emit()
 
     def _finish(self) -> None:
-        BackgroundCall._alive.discard(self)
         result, error = self._result, self._error
         self._result = self._error = None
+        # the worker holds this object (its thread's target) until it ends: let it end first,
+        # so that the last reference, and any QObject it keeps alive, goes on the GUI thread (a
+        # QObject freed on the worker deadlocks with the GUI thread deleting widgets)
+        if threading.current_thread() is not self.worker:
+            self.worker.join()
+        BackgroundCall._alive.discard(self)
         self._on_done(result, error)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import os
 import time
 from collections.abc import Callable, Iterator
@@ -16,6 +17,18 @@ from daq.gui.main_window import MainWindow, shown_path
 
 ROOT = Path(__file__).resolve().parents[2]
 SMOKE = ROOT / "protocols" / "smoke.yaml"
+
+
+@pytest.fixture(autouse=True)
+def _collect_qt_garbage_on_the_gui_thread() -> Iterator[None]:
+    """Collect the cyclic garbage (closed windows, widgets in reference cycles) here, on the
+    GUI thread, before and after every GUI test. Left for later, the collector ran it on
+    whichever thread allocated next: a worker of the next test, whose ~QObject then waited for
+    the GIL while holding Qt's mutex, and the GUI thread, deleting widgets, waited for that
+    mutex (the full suite hung three times in test_window; gdb: gc_collect_main on the worker)."""
+    gc.collect()
+    yield
+    gc.collect()
 
 
 @pytest.fixture
