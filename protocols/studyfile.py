@@ -15,14 +15,21 @@ Layout (``format = "biafc-study"``, ``format_version = 1`` on the root)::
     /spectra/freq_Hz      [F] (only with record_spectra); /spectra/<dir> [n_cells, F] float32
     /tasks/wall_s         [n_tasks] float64 (NaN until run); /tasks/worker [n_tasks] str
 
-A task's cells are written metrics first and status last, then the file is flushed: a cell
-whose status is not 0 is complete, so a resume (:meth:`StudyStore.open`) skips it. The client
-never holds more than the parameter table and the task in hand.
+Writing follows the run files' discipline (:mod:`protocols.runfile`): the layout is made under a
+temporary name and renamed once complete, then written in SWMR mode (``libver="latest"``), so a
+writer killed at any moment (SIGKILL, power cut) leaves a file whose every flushed task reads
+back. A task's metrics, spectra and messages are written and flushed first, its cells' status
+after, flushed again: a cell whose status is not 0 is complete, so a resume
+(:meth:`StudyStore.open`, which clears a killed writer's open-for-write flags as ``--resume``
+does) skips it. One writer per file: the caller holds :class:`daq.store.lock.RunFileLock`.
+``biafc repair`` makes a killed output readable by plain h5py. The client never holds more
+than the parameter table and the task in hand.
 """
 
 from __future__ import annotations
 
 import json
+import os
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -71,14 +78,24 @@ def _description(name: str) -> str:
 
 def is_study_file(path: str | Path) -> bool:
     """Whether ``path`` is an HDF5 study output (False for anything else, damaged included)."""
-    from protocols.hdf5probe import HDF5ProbeError, probe_hdf5
+    from protocols.runfile import open_for_reading
 
     try:
-        probe_hdf5(path)
-        with h5py.File(path, "r") as f:
+        with open_for_reading(path) as f:  # also one being written, or left by a killed writer
             return bool(f.attrs.get("format") == FORMAT)
-    except (OSError, ValueError, KeyError, RuntimeError, HDF5ProbeError):
+    except (OSError, ValueError, KeyError, RuntimeError):  # RunFileError is a ValueError
         return False
+
+
+def _open_writer(path: Path) -> h5py.File:
+    """``path`` opened to write tasks in SWMR mode (a file made before SWMR, whose superblock
+    cannot take it, is written as it is)."""
+    f = h5py.File(path, "r+", libver="latest")
+    try:
+        f.swmr_mode = True
+    except (ValueError, RuntimeError, OSError):
+        pass
+    return f
 
 
 class StudyStore:
@@ -105,8 +122,9 @@ class StudyStore:
     ) -> StudyStore:
         p = Path(path)
         p.parent.mkdir(parents=True, exist_ok=True)
-        tmp = p.with_name(p.name + ".part")
-        f = h5py.File(tmp, "w")
+        tmp = p.with_name(f".{p.name}.{os.getpid()}.part")
+        tmp.unlink(missing_ok=True)
+        f = h5py.File(tmp, "w", libver="latest")
         try:
             f.attrs.update(
                 {
@@ -160,16 +178,20 @@ class StudyStore:
             f.close()
             tmp.unlink(missing_ok=True)
             raise
-        tmp.replace(p)
-        return cls(p, h5py.File(p, "r+"))
+        tmp.replace(p)  # the caller holds the lock: no other writer makes this file
+        return cls(p, _open_writer(p))
 
     @classmethod
     def open(cls, path: str | Path, *, digest: str, table: CellTable) -> StudyStore:
         """Open an output to continue it; refused (:class:`StudyFileError`) when it is not a
-        study output, was made from another study (digest) or holds other cells."""
+        study output, was made from another study (digest) or holds other cells. The caller holds
+        the file's lock; the open-for-write flags a killed writer left are cleared first."""
+        from protocols.recover import clear_consistency_flags
+
         p = Path(path)
         try:
-            f = h5py.File(p, "r+")
+            clear_consistency_flags(p)  # as --resume of a run file: a killed writer's SWMR flags
+            f = h5py.File(p, "r+", libver="latest")
         except OSError as exc:
             raise StudyFileError(f"{p}: cannot open to continue it ({exc})") from None
         try:
@@ -193,8 +215,12 @@ class StudyStore:
         except BaseException:
             f.close()
             raise
-        f.attrs["status"] = "running"
+        f.attrs["status"] = "running"  # attributes are set before SWMR starts
         f.flush()
+        try:
+            f.swmr_mode = True
+        except (ValueError, RuntimeError, OSError):
+            pass  # an output made before SWMR: written as it is
         return cls(p, f)
 
     def done(self) -> NDArray[np.bool_]:
@@ -202,7 +228,8 @@ class StudyStore:
         return np.asarray(self.f["cells/status"][...] != 0)
 
     def write_task(self, task: int, result: Any) -> None:
-        """Write one :class:`analysis.study_cells.TaskResult` (cells sorted), status last."""
+        """Write one :class:`analysis.study_cells.TaskResult` (cells sorted): its numbers, flushed,
+        then its cells' status, flushed: a kill between the two leaves the task to run again."""
         idx = np.asarray(result.cells, dtype=np.int64)
         order = np.argsort(idx)
         idx = idx[order]
@@ -218,6 +245,7 @@ class StudyStore:
             self.f["cells/message"][int(cell)] = msg
         self.f["tasks/wall_s"][task] = result.wall_s
         self.f["tasks/worker"][task] = result.worker
+        self.f.flush()
         self.f["cells/status"][sel] = np.asarray(result.status)[order]
         self.f.flush()
 
@@ -225,9 +253,10 @@ class StudyStore:
         """Mark the output ``complete``, ``incomplete`` (interrupted) or ``failed``; close."""
         if not self.f.id.valid:
             return
-        self.f.attrs["status"] = status
         self.f.flush()
         self.f.close()
+        with h5py.File(self.path, "r+", libver="latest") as f:  # attributes: outside SWMR
+            f.attrs["status"] = status
 
 
 def _software() -> str:
@@ -268,34 +297,40 @@ class StudyData:
 
 def read_study(path: str | Path, *, spectra: bool = True) -> StudyData:
     """Read a whole study output (figures, tests). Raises :class:`StudyFileError`."""
+    from protocols.runfile import RunFileError, open_for_reading
+
     p = Path(path)
     try:
-        f = h5py.File(p, "r")
-    except OSError as exc:
-        raise StudyFileError(f"{p}: cannot read ({exc})") from None
-    with f:
-        if f.attrs.get("format") != FORMAT:
-            raise StudyFileError(f"{p}: not a study output")
-        attrs = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in f.attrs.items()}
-        pnames = json.loads(str(f["parameters"].attrs["order"]))
-        mnames = json.loads(str(f["metrics"].attrs["order"]))
-        units = {n: str(f["parameters"][n].attrs.get("unit", "")) for n in pnames}
-        units.update({n: str(f["metrics"][n].attrs.get("unit", "")) for n in mnames})
-        freq = None
-        spec: dict[str, NDArray[np.float32]] = {}
-        if spectra and "spectra" in f:
-            freq = f["spectra/freq_Hz"][...]
-            spec = {d: f["spectra"][d][...] for d in f["spectra"] if d != "freq_Hz"}
-        return StudyData(
-            path=p,
-            attrs=attrs,
-            parameters={n: f["parameters"][n][...] for n in pnames},
-            metrics={n: f["metrics"][n][...] for n in mnames},
-            units=units,
-            status=f["cells/status"][...],
-            point=f["cells/point"][...],
-            messages=f["cells/message"].asstr()[...],
-            spectrum_freq_Hz=freq,
-            spectra=spec,
-            task_wall_s=f["tasks/wall_s"][...],
-        )
+        with open_for_reading(p) as f:  # also one being written, or left by a killed writer
+            return _read_study(p, f, spectra)
+    except (OSError, RunFileError) as exc:
+        why = (str(exc).splitlines() or [type(exc).__name__])[0]
+        raise StudyFileError(f"{p}: cannot read ({why})") from None
+
+
+def _read_study(p: Path, f: h5py.File, spectra: bool) -> StudyData:
+    if f.attrs.get("format") != FORMAT:
+        raise StudyFileError(f"{p}: not a study output")
+    attrs = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in f.attrs.items()}
+    pnames = json.loads(str(f["parameters"].attrs["order"]))
+    mnames = json.loads(str(f["metrics"].attrs["order"]))
+    units = {n: str(f["parameters"][n].attrs.get("unit", "")) for n in pnames}
+    units.update({n: str(f["metrics"][n].attrs.get("unit", "")) for n in mnames})
+    freq = None
+    spec: dict[str, NDArray[np.float32]] = {}
+    if spectra and "spectra" in f:
+        freq = f["spectra/freq_Hz"][...]
+        spec = {d: f["spectra"][d][...] for d in f["spectra"] if d != "freq_Hz"}
+    return StudyData(
+        path=p,
+        attrs=attrs,
+        parameters={n: f["parameters"][n][...] for n in pnames},
+        metrics={n: f["metrics"][n][...] for n in mnames},
+        units=units,
+        status=f["cells/status"][...],
+        point=f["cells/point"][...],
+        messages=f["cells/message"].asstr()[...],
+        spectrum_freq_Hz=freq,
+        spectra=spec,
+        task_wall_s=f["tasks/wall_s"][...],
+    )

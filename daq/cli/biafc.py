@@ -22,7 +22,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "regime": ("regime", "transmission and output peak against amplitude, from the model"),
     "compare": ("compare", "the model on what a run did, beside the measurement"),
     "calibrate": ("calibrate", "fit the chain model to a scan's linear points"),
-    "repair": ("repair", "make a run file left by a killed writer readable by any reader"),
+    "repair": ("repair", "make a run file or study output left by a killed writer readable"),
     "check": ("check", "preflight: every instrument against the bench file"),
     "study": ("study", "a design study on the model, on Dask (serial, local or a cluster)"),
     "gui": ("gui", "the bench window"),

@@ -1,4 +1,5 @@
-"""``biafc repair RUN.h5 [RUN.h5 ...]``: make run files left by a killed writer readable by any
+"""``biafc repair RUN.h5 [RUN.h5 ...]``: make run files and study outputs (``biafc study``) left
+by a killed writer readable by any
 HDF5 reader, without losing a point (:mod:`daq.store.repair`). Exit 0 when every file opens
 with plain h5py afterwards; 2 when one is refused (not a run file, written by a live process)."""
 
@@ -12,7 +13,9 @@ __all__ = ["add_arguments", "run"]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("files", type=Path, nargs="+", metavar="RUN.h5", help="run file(s)")
+    parser.add_argument(
+        "files", type=Path, nargs="+", metavar="RUN.h5", help="run file(s) or study output(s)"
+    )
 
 
 def run(args: argparse.Namespace) -> int:

@@ -7,6 +7,10 @@ process writes it), clears the flags (as ``h5clear -s``), marks a run that was s
 ``running`` as ``aborted`` with a log row saying what was kept, removes the killed writer's
 leftovers (its stale lock, a half-made ``.NAME.PID.part``), and checks that plain h5py opens
 the result and sees the same points.
+
+A design study's output (``biafc study``, :mod:`protocols.studyfile`) is written the same way
+and repaired the same way: flags cleared, a study still ``running`` marked ``incomplete`` (run
+the same ``biafc study`` command again to continue it), every finished cell kept.
 """
 
 from __future__ import annotations
@@ -21,6 +25,7 @@ from daq.store.lock import RunFileLock, _alive
 from daq.store.run_store import StoreError
 from protocols.recover import clear_consistency_flags, has_consistency_flags
 from protocols.runfile import PointState, RunFileError, RunFileWriter, read_run
+from protocols.studyfile import is_study_file, read_study
 
 __all__ = ["RepairReport", "repair_run"]
 
@@ -36,11 +41,13 @@ class RepairReport:
     n_failed: int
     n_pending: int
     actions: list[str] = field(default_factory=list)
+    #: what was counted: "point(s) measured" (a run file) or "cell(s) run" (a study output)
+    counted: str = "point(s) measured"
 
     def line(self) -> str:
         did = "; ".join(self.actions) if self.actions else "nothing to repair"
         return (
-            f"{self.path}: {did}; {self.n_done} point(s) measured, {self.n_failed} failed, "
+            f"{self.path}: {did}; {self.n_done} {self.counted}, {self.n_failed} failed, "
             f"{self.n_pending} pending; status {self.status_after}; opens with plain h5py"
         )
 
@@ -98,6 +105,8 @@ def repair_run(path: str | Path) -> RepairReport:
         raise StoreError(str(exc)) from None
     try:
         actions = [lock.stale_note] if lock.stale_note else []
+        if is_study_file(path):
+            return _repair_study(path, actions)
         try:
             before_counts = _counts(path)
             status_before = read_run(path).status
@@ -137,3 +146,51 @@ def repair_run(path: str | Path) -> RepairReport:
         return RepairReport(path, status_before, status_after, *after_counts, actions=actions)
     finally:
         lock.release()
+
+
+def _study_counts(path: Path) -> tuple[int, int, int]:
+    from analysis.study_cells import STATUS_FAILED
+
+    status = read_study(path, spectra=False).status
+    n_failed = int(np.sum(status == STATUS_FAILED))
+    n_pending = int(np.sum(status == 0))
+    return status.size - n_failed - n_pending, n_failed, n_pending
+
+
+def _repair_study(path: Path, actions: list[str]) -> RepairReport:
+    """:func:`repair_run` of a study output (the caller holds its lock)."""
+    from protocols.studyfile import StudyFileError
+
+    try:
+        before_counts = _study_counts(path)
+        status_before = str(read_study(path, spectra=False).attrs.get("status", ""))
+    except (OSError, StudyFileError) as exc:
+        raise StoreError(f"{path} is not a readable biafc study output ({exc})") from None
+    if has_consistency_flags(path) and clear_consistency_flags(path):
+        actions.append("cleared the open-for-write flags of a killed writer")
+    status_after = status_before
+    if status_before == "running":
+        try:
+            f = h5py.File(path, "r+", libver="latest")
+        except OSError as exc:  # killed while writing metadata: copy every object
+            _rebuild(path)
+            actions.append(f"rebuilt the file (it took no writes: {str(exc)[:60]})")
+            f = h5py.File(path, "r+", libver="latest")
+        with f:
+            f.attrs["status"] = "incomplete"
+        status_after = "incomplete"
+        actions.append(
+            "marked the study incomplete (it was still 'running'; run it again to continue)"
+        )
+    for part in _leftovers(path):
+        part.unlink(missing_ok=True)
+        actions.append(f"removed the half-made {part.name}")
+    with h5py.File(path, "r") as f:  # what any reader does
+        if f.attrs.get("format") != "biafc-study":
+            raise StoreError(f"{path}: not readable after the repair")
+    after_counts = _study_counts(path)
+    if after_counts != before_counts:
+        raise StoreError(f"{path}: cells changed during the repair {before_counts}")
+    return RepairReport(
+        path, status_before, status_after, *after_counts, actions=actions, counted="cell(s) run"
+    )
