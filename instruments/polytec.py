@@ -62,10 +62,7 @@ _NOT_AVAILABLE = ("ERROR", "NOT AVAILABLE", "NOT INSTALLED")
 
 log = logging.getLogger(__name__)
 
-_PREFIX = {"": 1.0, "k": 1e3, "M": 1e6, "m": 1e-3, "u": 1e-6, "µ": 1e-6, "n": 1e-9}
-_SENS_RE = re.compile(r"([0-9]*\.?[0-9]+(?:[eE][+-]?\d+)?)\s*(mm|um|µm|nm|m)\s*/\s*s\s*/\s*V")
 _DECODER_RE = re.compile(r"^([A-Za-z]{2}-\d+\w*)\s+(.+)$")
-_LEN = {"m": 1.0, "mm": 1e-3, "um": 1e-6, "µm": 1e-6, "nm": 1e-9}
 
 
 #: The velocity decoders known on the OFV-5000 (with the OFV-534 head): decoder -> its ranges
@@ -123,27 +120,36 @@ def range_max_frequency_Hz(range_name: str) -> float | None:
 
 
 def parse_sensitivity(range_name: str) -> float:
-    """``"VD-09 10mm/s/V"`` -> 0.01 (m/s)/V. :class:`ReplyError` if no ``<x><unit>/s/V`` in it."""
-    m = _SENS_RE.search(range_name)
-    if m is None:
-        raise ReplyError(f"cannot read a sensitivity (e.g. '10mm/s/V') from range {range_name!r}")
-    value = float(m.group(1)) * _LEN[m.group(2)]
+    """``"VD-09 10mm/s/V"`` (or ``"10 mm/s/V"``) -> 0.01 (m/s)/V, read with the project's unit
+    registry (:mod:`instruments.units`). :class:`ReplyError` if it names no velocity per volt."""
+    from instruments.units import UnitError, parse_quantity
+
+    m = _DECODER_RE.match(range_name.strip())
+    text = m.group(2) if m else range_name
+    try:
+        value = parse_quantity(text.strip(), "velocity_per_volt")
+    except UnitError:
+        raise ReplyError(
+            f"cannot read a sensitivity (e.g. '10mm/s/V') from range {range_name!r}"
+        ) from None
     if not value > 0:
         raise ReplyError(f"range {range_name!r} gives a non-positive sensitivity")
     return value
 
 
 def parse_si_value(text: str, unit: str) -> float:
-    """``"100kHz"``/``"100 kHz"`` with ``unit="Hz"`` -> 1e5; a bare number is taken as SI."""
+    """``"100kHz"``/``"100 kHz"`` with ``unit="Hz"`` -> 1e5 (read with the project's unit
+    registry, in ``unit``: ``"Hz"`` or ``"s"``); a bare number is taken as SI."""
+    from instruments.units import DIMENSIONS, UnitError, parse_quantity
+
     s = text.strip()
-    m = re.fullmatch(
-        r"([+-]?[0-9]*\.?[0-9]+(?:[eE][+-]?\d+)?)\s*([kMmuµn]?)" + re.escape(unit) + "?", s
-    )
-    if m is None:
-        raise ReplyError(f"cannot read a value in {unit} from {text!r}")
-    if m.group(2) and not s.endswith(unit):
-        raise ReplyError(f"cannot read a value in {unit} from {text!r}")
-    return float(m.group(1)) * _PREFIX[m.group(2)]
+    if re.fullmatch(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?", s):
+        return float(s)
+    dimension = next(k for k, d in DIMENSIONS.items() if d.unit == unit)
+    try:
+        return parse_quantity(s, dimension)
+    except UnitError:
+        raise ReplyError(f"cannot read a value in {unit} from {text!r}") from None
 
 
 @dataclass(frozen=True)

@@ -1,23 +1,37 @@
-"""Quantities with units at the edges, SI floats inside.
+"""Quantities with units at the edges, SI floats inside: one pint registry for the project.
 
 Every number that a person types (YAML, command line, GUI) carries its unit: ``"8.92 kHz"``,
-``"2 um"``, ``"5 N"``, ``"30 ms"``. :func:`parse_quantity` turns such a string into a float in
-the SI unit of its dimension and refuses a bare number, an unknown unit or a unit of the wrong
-dimension with a one-line :class:`UnitError`.
+``"2 um"`` (or ``"2 µm"``, ``"2 micron"``), ``"5 N"``, ``"30 ms"``, ``"50 mm/s/V"``,
+``"0.05 um/V"``, ``"2 Vpp"``. :func:`parse_quantity` reads such a string with :mod:`pint` and
+returns a float in the unit of the named dimension (:data:`DIMENSIONS`: SI, or Vpp for a
+peak-to-peak voltage); it refuses a bare number, an unknown unit or a unit of the wrong
+dimension with a one-line :class:`UnitError` that names what was given and what is expected
+(``'2 um' is a length, expected a frequency (Hz, kHz)``).
+
+The registry holds the units of this project only, defined once in :data:`DEFINITIONS`: the SI
+units a bench file or protocol uses with their prefixes, a few others a lab types (micron,
+inch, min, h, deg), ``Vpp``/``Vpk`` (peak-to-peak and peak volts: ``1 Vpk = 2 Vpp``) and the
+sample (``S``, ``Sa``: ``1 MS/s``). Compound units (``um/V``, ``mm/s/V``, ``N/V``,
+``kg/m^3``) are pint's products of these. Built on first use (a few ms after ``import pint``,
+about 0.1 s), never at import.
 
 The pydantic annotated types at the bottom (``Frequency``, ``Length``, ...) make a model field
-accept only such strings and store the SI float, so a schema reads ``f_center: Frequency``.
+accept only such strings and store the float, so a schema reads ``f_center: Frequency``.
 """
 
 from __future__ import annotations
 
 import math
 import re
+import threading
+from dataclasses import dataclass
+from functools import lru_cache
 from typing import Annotated, Any
 
 from pydantic import BeforeValidator, PlainSerializer
 
 __all__ = [
+    "DEFINITIONS",
     "DIMENSIONS",
     "Acceleration",
     "Angle",
@@ -25,15 +39,21 @@ __all__ = [
     "Displacement",
     "Duration",
     "Force",
+    "ForcePerVolt",
     "Frequency",
     "Length",
+    "LengthPerVolt",
+    "PeakToPeakVoltage",
     "Pressure",
     "SampleRate",
     "UnitError",
     "Velocity",
+    "VelocityPerVolt",
     "Voltage",
+    "dimension_of",
     "format_quantity",
     "parse_quantity",
+    "registry",
 ]
 
 
@@ -41,78 +61,172 @@ class UnitError(ValueError):
     """A quantity without a unit, with an unknown unit, or with a unit of the wrong dimension."""
 
 
-_PREFIX: dict[str, float] = {
-    "p": 1e-12,
-    "n": 1e-9,
-    "u": 1e-6,
-    "µ": 1e-6,
-    "μ": 1e-6,
-    "m": 1e-3,
-    "c": 1e-2,
-    "": 1.0,
-    "k": 1e3,
-    "M": 1e6,
-    "G": 1e9,
+#: the project's units, in pint's definition syntax: the one place they are defined
+DEFINITIONS = """
+pico- = 1e-12 = p-
+nano- = 1e-9 = n-
+micro- = 1e-6 = µ- = μ- = u-
+milli- = 1e-3 = m-
+centi- = 1e-2 = c-
+kilo- = 1e3 = k-
+mega- = 1e6 = M-
+giga- = 1e9 = G-
+meter = [length] = m = metre
+second = [time] = s = sec
+gram = [mass] = g
+volt = [voltage] = V
+radian = [] = rad
+sample = [] = S = Sa
+micron = micrometer
+inch = 0.0254 * meter = in
+minute = 60 * second = min
+hour = 60 * minute = h = hr
+degree = 0.017453292519943295 * radian = deg
+hertz = 1 / second = Hz
+newton = kilogram * meter / second ** 2 = N
+pascal = newton / meter ** 2 = Pa
+volt_peak = volt = Vpk = V_pk
+volt_peak_to_peak = 0.5 * volt = Vpp = V_pp
+"""
+
+
+@dataclass(frozen=True)
+class Dimension:
+    """A kind of quantity: the unit its floats are in, how to name it, units to suggest."""
+
+    unit: str
+    name: str
+    examples: str
+
+
+#: dimension name -> the unit of the float :func:`parse_quantity` returns, its name in messages,
+#: and units to suggest
+DIMENSIONS: dict[str, Dimension] = {
+    "frequency": Dimension("Hz", "a frequency", "Hz, kHz"),
+    "sample_rate": Dimension("S/s", "a sample rate", "S/s, kS/s, MS/s"),
+    "length": Dimension("m", "a length", "m, mm, um"),
+    "time": Dimension("s", "a duration", "s, ms, us"),
+    "force": Dimension("N", "a force", "N, mN"),
+    "mass": Dimension("kg", "a mass", "kg, g"),
+    "voltage": Dimension("V", "a voltage", "V, mV"),
+    "peak_to_peak_voltage": Dimension("Vpp", "a peak-to-peak voltage", "Vpp, mVpp, Vpk"),
+    "velocity": Dimension("m/s", "a velocity", "m/s, mm/s"),
+    "acceleration": Dimension("m/s^2", "an acceleration", "m/s^2"),
+    "pressure": Dimension("Pa", "a pressure", "Pa, GPa"),
+    "density": Dimension("kg/m^3", "a density", "kg/m^3, g/cm^3"),
+    "length_per_volt": Dimension("m/V", "a length per volt", "um/V, nm/V"),
+    "velocity_per_volt": Dimension("m/s/V", "a velocity per volt", "mm/s/V"),
+    "force_per_volt": Dimension("N/V", "a force per volt", "N/V"),
+    "angle": Dimension("rad", "an angle", "deg, rad"),
+    "dimensionless": Dimension("", "a plain number", "no unit"),
 }
 
-#: dimension name -> {base unit symbol: factor to SI}; prefixes apply to every symbol listed.
-DIMENSIONS: dict[str, dict[str, float]] = {
-    "frequency": {"Hz": 1.0},
-    "sample_rate": {"S/s": 1.0, "Sa/s": 1.0, "Hz": 1.0},
-    "length": {"m": 1.0, "in": 0.0254},
-    "time": {"s": 1.0, "min": 60.0, "h": 3600.0},
-    "force": {"N": 1.0},
-    "voltage": {"V": 1.0, "Vpp": 1.0},
-    "velocity": {"m/s": 1.0},
-    "acceleration": {"m/s^2": 1.0, "m/s2": 1.0},
-    "pressure": {"Pa": 1.0},
-    "density": {"kg/m^3": 1.0, "kg/m3": 1.0, "g/cm^3": 1000.0, "g/cm3": 1000.0},
-    "angle": {"deg": math.pi / 180.0, "rad": 1.0},
-    "dimensionless": {"": 1.0},
-}
+#: a bare volt (with a prefix): it does not say whether it is a peak or a peak-to-peak value
+_BARE_VOLT = re.compile(r"^[pnuµμmckMG]?V$")
 
-#: the SI unit written back by :func:`format_quantity`
-SI_SYMBOL: dict[str, str] = {
-    "frequency": "Hz",
-    "sample_rate": "S/s",
-    "length": "m",
-    "time": "s",
-    "force": "N",
-    "voltage": "V",
-    "velocity": "m/s",
-    "acceleration": "m/s^2",
-    "pressure": "Pa",
-    "density": "kg/m^3",
-    "angle": "rad",
-    "dimensionless": "",
-}
+_LOCK = threading.Lock()
+
+
+@lru_cache(maxsize=1)
+def _build_registry() -> Any:
+    import pint
+
+    ureg: Any = pint.UnitRegistry(None, autoconvert_offset_to_baseunit=False)
+    for line in DEFINITIONS.strip().splitlines():
+        ureg.define(line)
+    return ureg
+
+
+def registry() -> Any:
+    """The project's :class:`pint.UnitRegistry` (built on first use, then shared)."""
+    with _LOCK:
+        return _build_registry()
+
 
 _NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
-_QUANTITY_RE = re.compile(rf"^\s*({_NUMBER})\s*(.*?)\s*$")
-# prefixes that are never applied to these (to keep "min", "in", "m/s" unambiguous)
-_NO_PREFIX = {"min", "h", "in", "deg", "rad"}
+_QUANTITY_RE = re.compile(rf"^\s*({_NUMBER})\s*(.*?)\s*$", re.DOTALL)
+#: what a unit may be written with (pint would also evaluate arithmetic: never given that)
+_UNIT_CHARS = re.compile(r"^[A-Za-zµμ_/*^().·²³\s0-9+-]{0,40}$")
+#: "cm3", "s2": a power written without its operator
+_BARE_POWER = re.compile(r"(?<=[A-Za-zµμ])([23])(?![0-9A-Za-z])")
+_EXPONENT = re.compile(r"(?:\^|\*\*)\s*\(?\s*[-+]?\d{1,2}\s*\)?")
+_TOWER = re.compile(r"\*\*[\s()+-]*\d+[\s()]*\*\*")
 
 
-def _unit_factor(unit: str, dimension: str) -> float | None:
-    table = DIMENSIONS[dimension]
-    if unit in table:
-        return table[unit]
-    for symbol, factor in table.items():
-        if not symbol or symbol in _NO_PREFIX or not unit.endswith(symbol):
-            continue
-        prefix = unit[: len(unit) - len(symbol)]
-        if prefix in _PREFIX and prefix != "":
-            return _PREFIX[prefix] * factor
+def _unit_text(unit: str) -> str | None:
+    """``unit`` as pint reads it (``^`` and bare powers as ``**``), or ``None`` when it is not
+    a product of unit names with small integer powers."""
+    if not _UNIT_CHARS.match(unit):
+        return None
+    text = unit.replace("·", "*").replace("²", "2").replace("³", "3")
+    text = _BARE_POWER.sub(r"**\1", text).replace("^", "**")
+    if _TOWER.search(text):  # a power of a power: pint would compute it, however large
+        return None
+    rest = _EXPONENT.sub(" ", text)
+    if re.search(r"\d", rest) or "**" in rest:  # a number that is not a small power
+        return None
+    return text
+
+
+@lru_cache(maxsize=512)
+def _factor(unit: str, dimension: str) -> tuple[float | None, str]:
+    """(factor from ``unit`` to the dimension's unit, or ``None``; what ``unit`` is)."""
+    import pint
+
+    ureg = registry()
+    text = _unit_text(unit)
+    if text is None:
+        return None, "unreadable"
+    try:
+        units = ureg.parse_units(text)
+    except pint.UndefinedUnitError as exc:
+        names = getattr(exc, "unit_names", None) or ()
+        shown = ", ".join(repr(n) for n in ([names] if isinstance(names, str) else names))
+        return None, f"unknown unit {shown or repr(unit)}"
+    except Exception:
+        return None, "unreadable"
+    target = ureg.parse_units(_unit_text(DIMENSIONS[dimension].unit) or "")
+    if units.dimensionality != target.dimensionality:
+        return None, _dimension_name(units)
+    return float(ureg.Quantity(1.0, units).to(target).magnitude), ""
+
+
+def _dimension_name(units: Any) -> str:
+    """``'is a length'`` for a unit of a known dimension, else ``'has unit m * s'``."""
+    if units.dimensionless:
+        return "has no dimension"
+    ureg = registry()
+    for dim in DIMENSIONS.values():
+        if dim.unit and ureg.parse_units(_unit_text(dim.unit) or "").dimensionality == (
+            units.dimensionality
+        ):
+            return f"is {dim.name}"
+    return f"has unit {units:~}"
+
+
+def dimension_of(value: Any) -> str | None:
+    """The first key of :data:`DIMENSIONS` whose unit ``value`` (``"<number> <unit>"``) is
+    written in (``"2 Vpp"`` -> ``"voltage"``, ``"2 um"`` -> ``"length"``), or ``None`` (no
+    unit, an unknown or unreadable one, or a string that is no quantity)."""
+    if not isinstance(value, str):
+        return None
+    match = _QUANTITY_RE.match(value)
+    if not match or not match.group(2):
+        return None
+    for name in DIMENSIONS:
+        if name != "dimensionless" and _factor(match.group(2), name)[0] is not None:
+            return name
     return None
 
 
 def parse_quantity(value: Any, dimension: str, *, field: str = "") -> float:
-    """Parse ``"<number> <unit>"`` into a float in the SI unit of ``dimension``.
+    """Parse ``"<number> <unit>"`` into a float in the unit of ``dimension``.
 
     Parameters
     ----------
     value:
-        A string such as ``"8.92 kHz"``; for ``dimension="dimensionless"`` a plain number too.
+        A string such as ``"8.92 kHz"``, ``"8.92kHz"``, ``"2 µm"``, ``"50 mm/s/V"``; for
+        ``dimension="dimensionless"`` a plain number too.
     dimension:
         A key of :data:`DIMENSIONS` (``"frequency"``, ``"length"``, ...).
     field:
@@ -121,50 +235,67 @@ def parse_quantity(value: Any, dimension: str, *, field: str = "") -> float:
     Raises
     ------
     UnitError
-        For a bare number (other than dimensionless), an unknown unit, a unit of another
-        dimension, or a non-finite value.
+        One line, for a bare number (other than dimensionless), an unknown unit, a unit of
+        another dimension (``'2 um' is a length, expected a frequency (Hz, kHz)``), a bare
+        volt where a peak-to-peak voltage is asked for, or a non-finite value.
     """
     if dimension not in DIMENSIONS:
         raise UnitError(f"unknown dimension {dimension!r}")
+    dim = DIMENSIONS[dimension]
     where = f"{field}: " if field else ""
-    expected = "/".join(k for k in DIMENSIONS[dimension] if k) or "no unit"
+    expected = f"expected {dim.name} ({dim.examples})"
+    first = dim.examples.split(",")[0]
     if isinstance(value, bool):
-        raise UnitError(f"{where}expected a {dimension} with a unit ({expected}), got {value!r}")
+        raise UnitError(f"{where}{value!r} is not a quantity; {expected}")
     if isinstance(value, int | float):
         if dimension == "dimensionless":
             number = float(value)
             if not math.isfinite(number):
                 raise UnitError(f"{where}value must be finite, got {value!r}")
             return number
-        example = f"{value} {expected.split('/')[0]}"
-        raise UnitError(f"{where}{value!r} has no unit; write it with one, e.g. '{example}'")
+        raise UnitError(f"{where}{value!r} has no unit; write it with one, e.g. '{value} {first}'")
     if not isinstance(value, str):
         raise UnitError(f"{where}expected a quantity string such as '8.92 kHz', got {value!r}")
     match = _QUANTITY_RE.match(value)
     if not match:
-        raise UnitError(f"{where}cannot read {value!r} as '<number> <unit>'")
+        raise UnitError(f"{where}cannot read {value!r} as '<number> <unit>'; {expected}")
     number = float(match.group(1))
     unit = match.group(2)
     if not math.isfinite(number):
         raise UnitError(f"{where}value must be finite, got {value!r}")
     if unit == "" and dimension != "dimensionless":
-        example = f"{number:g} {expected.split('/')[0]}"
-        raise UnitError(f"{where}{value!r} has no unit; write it with one, e.g. '{example}'")
-    factor = _unit_factor(unit, dimension)
+        raise UnitError(
+            f"{where}{value!r} has no unit; write it with one, e.g. '{number:g} {first}'"
+        )
+    if dimension == "peak_to_peak_voltage" and _BARE_VOLT.match(unit):
+        raise UnitError(
+            f"{where}{value!r} does not say peak or peak-to-peak; write '{number:g} {unit}pp' "
+            f"or '{number:g} {unit}pk'"
+        )
+    factor, what = _factor(unit, dimension)
     if factor is None:
-        raise UnitError(f"{where}unit {unit!r} is not a {dimension} unit (use {expected})")
-    return number * factor
+        if what == "unreadable":
+            raise UnitError(f"{where}cannot read the unit of {value!r}; {expected}")
+        if what.startswith("unknown unit"):
+            raise UnitError(f"{where}{what} in {value!r}; {expected}")
+        raise UnitError(f"{where}{value!r} {what}, {expected}")
+    result = number * factor
+    if not math.isfinite(result):
+        raise UnitError(f"{where}value must be finite, got {value!r}")
+    return result
 
 
-def format_quantity(value_si: float, dimension: str, *, digits: int = 4) -> str:
-    """Format an SI value with an engineering prefix, e.g. ``8920.0 -> '8.92 kHz'``."""
-    symbol = SI_SYMBOL[dimension]
-    if dimension in ("dimensionless", "angle", "density", "acceleration") or value_si == 0:
-        return f"{value_si:.{digits}g} {symbol}".strip()
-    exponent = int(math.floor(math.log10(abs(value_si)) / 3) * 3)
+def format_quantity(value: float, dimension: str, *, digits: int = 4) -> str:
+    """Format a float in the unit of ``dimension`` with an engineering prefix, e.g.
+    ``8920.0 -> '8.92 kHz'``; :func:`parse_quantity` reads it back."""
+    symbol = DIMENSIONS[dimension].unit
+    plain = ("dimensionless", "angle", "density", "acceleration", "mass")
+    if dimension in plain or value == 0 or not math.isfinite(value):
+        return f"{value:.{digits}g} {symbol}".strip()
+    exponent = int(math.floor(math.log10(abs(value)) / 3) * 3)
     exponent = max(-12, min(9, exponent))
     prefixes = {-12: "p", -9: "n", -6: "u", -3: "m", 0: "", 3: "k", 6: "M", 9: "G"}
-    return f"{value_si / 10**exponent:.{digits}g} {prefixes[exponent]}{symbol}"
+    return f"{value / 10**exponent:.{digits}g} {prefixes[exponent]}{symbol}"
 
 
 def _validator(dimension: str) -> BeforeValidator:
@@ -185,8 +316,16 @@ Displacement = Length
 Duration = Annotated[float, _validator("time"), _serializer("time")]
 Force = Annotated[float, _validator("force"), _serializer("force")]
 Voltage = Annotated[float, _validator("voltage"), _serializer("voltage")]
+PeakToPeakVoltage = Annotated[
+    float, _validator("peak_to_peak_voltage"), _serializer("peak_to_peak_voltage")
+]
 Velocity = Annotated[float, _validator("velocity"), _serializer("velocity")]
 Acceleration = Annotated[float, _validator("acceleration"), _serializer("acceleration")]
 Pressure = Annotated[float, _validator("pressure"), _serializer("pressure")]
 Density = Annotated[float, _validator("density"), _serializer("density")]
 Angle = Annotated[float, _validator("angle"), _serializer("angle")]
+LengthPerVolt = Annotated[float, _validator("length_per_volt"), _serializer("length_per_volt")]
+VelocityPerVolt = Annotated[
+    float, _validator("velocity_per_volt"), _serializer("velocity_per_volt")
+]
+ForcePerVolt = Annotated[float, _validator("force_per_volt"), _serializer("force_per_volt")]

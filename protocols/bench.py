@@ -20,8 +20,8 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator, model_valida
 from instruments.units import (
     Duration,
     Length,
+    PeakToPeakVoltage,
     SampleRate,
-    UnitError,
     Velocity,
     Voltage,
     format_quantity,
@@ -34,13 +34,6 @@ __all__ = ["BenchFile", "BenchSpec", "default_bench_path", "load_bench", "parse_
 
 class _Model(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
-
-
-def _per_volt(value: Any, dimension: str) -> float:
-    """``"0.05 um/V"`` -> 5e-8 (SI per volt)."""
-    if not isinstance(value, str) or not value.strip().endswith("/V"):
-        raise UnitError(f"{value!r}: write it per volt, e.g. '0.05 um/V'")
-    return _pq(value.strip()[:-2], dimension)
 
 
 #: serial line speed of Zaber ASCII devices and the Polytec OFV-5000 as shipped (baud)
@@ -75,7 +68,7 @@ class GeneratorSpec(_Model):
     high Z), ``sample_rate`` of its arbitrary waveforms (S/s, up to 1 GSa/s)."""
 
     resource: str
-    max_amplitude: Voltage = 10.0  # Vpp at the output
+    max_amplitude: PeakToPeakVoltage = 10.0  # Vpp at the output
     sample_rate: SampleRate = 1.0e6
     timeout: Duration = 5.0
     baud_rate: int | None = Field(default=None, gt=0)  # only for a serial (ASRL) resource
@@ -108,7 +101,7 @@ class AmplifierSpec(_Model):
     @field_validator("piezo_stroke", mode="before")
     @classmethod
     def _stroke(cls, v: Any) -> float:
-        stroke = _per_volt(v, "length")
+        stroke = _pq(v, "length_per_volt")
         if not (math.isfinite(stroke) and 0 < stroke <= 1e-3):
             raise ValueError(f"{v!r} is not allowed: give a stroke above 0 um/V, up to 1 mm/V")
         return stroke
@@ -118,7 +111,7 @@ class AmplifierSpec(_Model):
     def _force(cls, v: Any) -> float | None:
         if v is None:
             return None
-        force = _per_volt(v, "force")
+        force = _pq(v, "force_per_volt")
         if not (math.isfinite(force) and 0 < force <= 1e6):
             raise ValueError(f"{v!r} is not allowed: give a force above 0 N/V, up to 1 MN/V")
         return force

@@ -37,11 +37,8 @@ def parse_stroke(text: str) -> float:
     """``'0.04 um/V'`` -> 4e-8 (m/V); raises :class:`CliError`."""
     from instruments.units import UnitError, parse_quantity
 
-    t = text.strip()
-    if not t.endswith("/V"):
-        raise CliError(f"--piezo-stroke {text!r}: write it per volt, e.g. '0.04 um/V'")
     try:
-        value = parse_quantity(t[:-2].strip(), "length", field="--piezo-stroke")
+        value = parse_quantity(text, "length_per_volt", field="--piezo-stroke")
     except UnitError as exc:
         raise CliError(str(exc)) from None
     if not value > 0:
