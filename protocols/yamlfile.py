@@ -13,11 +13,14 @@ it is read, never expanded). Merge keys (``<<``) and keys that are not scalars a
 
 from __future__ import annotations
 
+import difflib
 import os
+import re
+import types
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Annotated, Any, TypeVar, Union, get_args, get_origin
 
 import yaml
 from pydantic import BaseModel, ValidationError
@@ -286,21 +289,30 @@ def _shown(value: Any, limit: int = 60) -> str:
 
 def validate(doc: YamlDoc, model: type[M], context: dict[str, Any] | None = None) -> M:
     """Validate ``doc.data`` against ``model``; the first error becomes a one-line
-    :class:`ConfigError` naming the file, the line and the field."""
+    :class:`ConfigError` naming the file, the line and the field.
+
+    An unknown key is reported before anything else (a misspelt key also leaves its field
+    missing), with the closest allowed key at that place (``unknown key 'frequncy'; did you
+    mean 'f_center'?``); of a union (a list or a mapping), the errors of the branch that
+    matches the written value are reported."""
     if not isinstance(doc.data, dict):
         raise doc.error((), "the file must hold a mapping of keys to values")
     try:
         return model.model_validate(doc.data, context=context)
     except ValidationError as exc:
-        err = exc.errors()[0]
-        loc = [p for p in err["loc"] if not (isinstance(p, str) and "[" in p)]
+        errors = exc.errors()
+        err = min(errors, key=_rank)
+        raw_loc = tuple(err["loc"])
+        loc = _data_loc(doc.data, raw_loc)
         msg = str(err["msg"])
         for prefix in ("Value error, ", "Assertion failed, "):
             msg = msg.removeprefix(prefix)
         if err["type"] == "extra_forbidden":
-            msg = "unknown key"
+            msg = _unknown_key(doc.data, model, raw_loc, errors)
         elif err["type"] == "missing":
             msg = "missing (required)"
+        elif err["type"] == "literal_error" and isinstance(err.get("input"), str):
+            msg += _did_you_mean(err["input"], re.findall(r"'([^']*)'", str(err["msg"])))
         msg = msg.splitlines()[0]
         if err["type"] not in ("value_error", "assertion_error", "extra_forbidden", "missing"):
             msg += f", got {_shown(err.get('input'))}"  # pydantic's own checks omit the value
@@ -311,3 +323,108 @@ def validate(doc: YamlDoc, model: type[M], context: dict[str, Any] | None = None
             if (*loc, sub[0]) in doc.lines:
                 loc, msg = [*loc, *sub], tail
         raise doc.error(loc, msg) from None
+
+
+#: errors that say only that a value is not of one branch's type (a union's other branches)
+_TYPE_ERRORS = frozenset(
+    {"list_type", "dict_type", "model_type", "model_attributes_type", "string_type", "tuple_type"}
+)
+
+
+def _rank(err: Any) -> int:
+    """Which error to report: an unknown key first, then what is wrong with a value, then
+    the type errors of a union's branches that do not match the written value."""
+    if err["type"] == "extra_forbidden":
+        return 0
+    return 2 if err["type"] in _TYPE_ERRORS else 1
+
+
+def _data_loc(data: Any, loc: Sequence[str | int]) -> list[str | int]:
+    """``loc`` as a path in the data: without pydantic's union tags (``AmplitudeRange``,
+    ``list[str]``), keeping a last part that is not there (a missing key)."""
+    out: list[str | int] = []
+    node = data
+    for i, part in enumerate(loc):
+        if isinstance(node, dict) and part in node:
+            node = node[part]
+        elif isinstance(node, list) and isinstance(part, int) and 0 <= part < len(node):
+            node = node[part]
+        elif i < len(loc) - 1 or (isinstance(part, str) and "[" in part):
+            continue  # a tag of a union's branch
+        out.append(part)
+    return out
+
+
+def _did_you_mean(word: str, allowed: Sequence[str]) -> str:
+    close = difflib.get_close_matches(word, list(allowed), n=1, cutoff=0.6)
+    return f"; did you mean {close[0]!r}?" if close else ""
+
+
+def _unknown_key(data: Any, model: type[BaseModel], loc: Path_, errors: Sequence[Any]) -> str:
+    """``unknown key 'frequncy'; did you mean 'f_center'? (allowed here: ...)``: the closest
+    allowed key not written yet, else the one required key missing beside it."""
+    key = str(loc[-1])
+    allowed = _keys_at(model, loc[:-1])
+    if not allowed:
+        return f"unknown key {key!r}"
+    written = _written_keys(data, loc[:-1])
+    free = [k for k in allowed if k not in written]
+    hint = _did_you_mean(key, free)
+    if not hint:
+        missing = [
+            str(e["loc"][-1])
+            for e in errors
+            if e["type"] == "missing" and tuple(e["loc"][:-1]) == tuple(loc[:-1])
+        ]
+        if len(missing) == 1:
+            hint = f"; did you mean {missing[0]!r}?"
+    return f"unknown key {key!r}" + (hint or f" (allowed here: {', '.join(allowed)})")
+
+
+def _written_keys(data: Any, loc: Sequence[str | int]) -> set[str]:
+    node = data
+    for part in loc:
+        if isinstance(node, dict) and part in node:
+            node = node[part]
+        elif isinstance(node, list) and isinstance(part, int) and 0 <= part < len(node):
+            node = node[part]
+    return {str(k) for k in node} if isinstance(node, dict) else set()
+
+
+def _keys_at(model: type[BaseModel], loc: Sequence[str | int]) -> list[str]:
+    """The field names of the model(s) found by following ``loc`` from ``model`` (union tags
+    select a branch; list indices and mapping keys step into the item type)."""
+    current: list[Any] = [model]
+    for part in loc:
+        reached = [a for ann in current for leaf in _leaves(ann) for a in _step(leaf, part)]
+        if reached:
+            current = reached
+    names: list[str] = []
+    for ann in current:
+        for leaf in _leaves(ann):
+            if isinstance(leaf, type) and issubclass(leaf, BaseModel):
+                names += [n for n in leaf.model_fields if n not in names]
+    return names
+
+
+def _leaves(ann: Any) -> list[Any]:
+    """The members of a union (or the type inside ``Annotated``), recursively."""
+    origin = get_origin(ann)
+    if origin is Annotated:
+        return _leaves(get_args(ann)[0])
+    if origin is Union or origin is types.UnionType:
+        return [leaf for a in get_args(ann) for leaf in _leaves(a)]
+    return [ann]
+
+
+def _step(ann: Any, part: str | int) -> list[Any]:
+    if isinstance(ann, type) and issubclass(ann, BaseModel):
+        if isinstance(part, str) and part in ann.model_fields:
+            return [ann.model_fields[part].annotation]
+        return [ann] if part == ann.__name__ else []
+    origin, args = get_origin(ann), get_args(ann)
+    if origin in (list, tuple, set, frozenset) and isinstance(part, int) and args:
+        return [args[min(part, len(args) - 1)] if origin is tuple else args[0]]
+    if origin is dict and len(args) == 2:
+        return [args[1]]
+    return []
