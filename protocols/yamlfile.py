@@ -378,6 +378,9 @@ def _unknown_key(data: Any, model: type[BaseModel], loc: Path_, errors: Sequence
         ]
         if len(missing) == 1:
             hint = f"; did you mean {missing[0]!r}?"
+    if not hint:
+        close = difflib.get_close_matches(key, sorted(written & set(allowed)), n=1, cutoff=0.6)
+        hint = f"; did you mean {close[0]!r}? (it is given too)" if close else ""
     return f"unknown key {key!r}" + (hint or f" (allowed here: {', '.join(allowed)})")
 
 
