@@ -89,7 +89,7 @@ def test_bad_protocol_is_one_line(tmp_path, capsys, no_instruments) -> None:
     f = tmp_path / "p.yaml"
     f.write_text(PROTOCOL.replace("averages: 2", "averages: 2\ncolour: red"))
     err = _main_err([str(f), "--out", str(tmp_path / "o.h5")], capsys)
-    assert err.endswith("colour: unknown key") and f"{f}:" in err
+    assert "colour: unknown key 'colour'" in err and f"{f}:" in err
     assert not (tmp_path / "o.h5").exists() and not no_instruments
 
 
