@@ -109,7 +109,7 @@ def _model_compiled() -> bool:
 
 def _dem_run_s(bench_file: Any) -> float:
     """Seconds of one DEM run of the simulated bench (its error estimate included)."""
-    from sim_backend.dem.simulation import DEFAULT_DT_S, DEFAULT_INTEGRATOR
+    from sim_backend.dem.defaults import DEFAULT_DT_S, DEFAULT_INTEGRATOR
 
     bench = bench_file.bench
     sim = bench.simulation

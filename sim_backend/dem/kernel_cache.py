@@ -131,9 +131,11 @@ def announce_if_cold() -> bool:
     reporter = _REPORTER
     if reporter is None or _ANNOUNCED or kernel_cached_on_disk():
         return False
-    from sim_backend.dem.kernel import run_batch
+    import sys
 
-    if run_batch.signatures:
+    # the kernel not imported yet: nothing compiled in this process (and no numba loaded
+    # before the notice is out)
+    if "sim_backend.dem.kernel" in sys.modules and kernel_loaded():
         return False
     _ANNOUNCED = True
     reporter("start", 0.0, kernel_cache_dir(), True)

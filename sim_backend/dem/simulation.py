@@ -13,6 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sim_backend.dem.chain import Chain
+from sim_backend.dem.defaults import DEFAULT_DT_S, DEFAULT_DT_TOP_HZ, DEFAULT_INTEGRATOR
 from sim_backend.dem.drive import Drive
 from sim_backend.dem.errors import step_doubling_error
 from sim_backend.dem.kernel import drift_coefficients, run_batch
@@ -65,18 +66,6 @@ INTEGRATORS: dict[str, tuple[int, tuple[float, ...], tuple[float, ...]]] = {
     "blanes-moan4": (4, *_BM4),
     "yoshida6": (6, *_from_strang(tuple(z * w for z in (_Z1, _Z0, _Z1) for w in (_W1, _W0, _W1)))),
 }
-DEFAULT_INTEGRATOR = "blanes-moan4"
-#: default step (s) of each integrator (chosen from benchmarks/dem_sweep: error <= 1e-4)
-DEFAULT_DT_S: dict[str, float] = {
-    "strang": 0.1e-6,
-    "yoshida4": 1.0e-6,
-    "suzuki4": 1.0e-6,
-    "blanes-moan4": 2.0e-6,
-    "yoshida6": 2.0e-6,
-}
-#: the default steps hold for block modes up to this frequency (the default chain's top block
-#: mode is 82 kHz); stiffer blocks (more modes, shorter cylinders) get proportionally smaller steps
-DEFAULT_DT_TOP_HZ = 85.0e3
 DEFAULT_SAMPLE_RATE_HZ = 500.0e3
 #: quantities :func:`simulate` can record
 RECORDABLE = ("velocity", "displacement", "drive")
