@@ -67,7 +67,7 @@ BAD = [
         "  diameter: {from: 12 N, to: 15 mm, count: 3}",
         4,
         "parameters.diameter.from",
-        "not a length unit",
+        "is a force, expected a length",
     ),
     ("  diameter: {from: 12, to: 15 mm, count: 3}", 4, "parameters.diameter.from", "no unit"),
 ]
