@@ -13,11 +13,14 @@ and records. Each kind has a prior cost in seconds (:class:`PointCosts`):
   run of ``dem_duration`` at the integrator's step, with its step-doubling error estimate (1.5
   runs), at :data:`SECONDS_PER_MODE_STEP` per cylinder-mode and step, plus :data:`COMPILE_S`
   once when the compiled model is not cached yet; other points cost :data:`SIM_POINT_S` plus
-  :data:`SIM_SAMPLE_S` per recorded sample (the emulated instruments and the noise).
+  :data:`SIM_SAMPLE_S` per recorded sample (the emulated instruments and the noise), times the
+  machine's load (:func:`load_factor`: a busy machine gives this process a share of a core).
 
 :class:`EtaEstimator` replaces a kind's prior by the median of its measured times as soon as
 one is measured (the run's very first point is left out once others of its kind exist: it
-carries one-time costs such as compiling or homing), so the ETA follows the bench at hand.
+carries one-time costs such as compiling or homing), so the ETA follows the bench at hand. The
+engine gives it the wall time from the end of one point to the end of the next, so what runs
+between points (the progress display, the boundary checks) is counted as well.
 """
 
 from __future__ import annotations
@@ -40,6 +43,7 @@ __all__ = [
     "PointCosts",
     "arms_burst",
     "dem_run_estimate_s",
+    "load_factor",
     "model_compiled",
     "prior_costs",
 ]
@@ -67,6 +71,18 @@ class PointCosts:
     arm_s: float
     basis: str
     first_extra_s: float = 0.0  # one-time cost at the first point (compiling the model)
+
+
+def load_factor() -> float:
+    """How much slower than on an idle machine a CPU-bound run goes now: (1-minute load average
+    + 1) / cores, at least 1 (1 where the load average is not known)."""
+    import os
+
+    try:
+        load = os.getloadavg()[0]
+    except (AttributeError, OSError):
+        return 1.0
+    return max(1.0, (load + 1.0) / (os.cpu_count() or 1))
 
 
 def arms_burst(points: Sequence[Any]) -> list[bool]:
@@ -146,14 +162,17 @@ def prior_costs(protocol: Any, bench_file: Any, positions_m: Sequence[float]) ->
         return PointCosts(physical, ARM_S, "the bench's settle, record and stage times")
     speedup = float(getattr(sim, "speedup", 0.0) or 0.0)
     samples = protocol.averages * acq.n_samples()
-    point_s = SIM_POINT_S + SIM_SAMPLE_S * samples
+    load = load_factor()
+    point_s = (SIM_POINT_S + SIM_SAMPLE_S * samples) * load
     if speedup > 0:
         point_s += physical / speedup
     compile_s = 0.0 if _model_compiled() else COMPILE_S
     basis = "the model's cost on the simulated bench"
     if compile_s:
         basis += f" (the model is compiled first: about {COMPILE_S:.0f} s, once)"
-    return PointCosts(point_s, _dem_run_s(bench_file), basis, compile_s)
+    if load > 1.0:
+        basis += f" (x{load:.1f} for the machine's load)"
+    return PointCosts(point_s, _dem_run_s(bench_file) * load, basis, compile_s)
 
 
 class EtaEstimator:
