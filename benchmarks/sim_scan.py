@@ -1,6 +1,10 @@
 """A full simulated scan through the real drivers: 31 cylinders x 2 directions x 8 amplitudes x
 4 averages on the simulated bench with speed-up 0.
 
+The amplitudes are peak actuator displacements, as a protocol gives them (0.025 to 5 um, log
+spaced); the generator plays them through the bench's actuator (amplifier gain and piezo stroke:
+1 um per generator volt peak on the shipped bench, so 0.05 to 10 Vpp). The table gives both.
+
 Reports the wall time (``wall_s``) and how it splits between the DEM (``dem_s``: the 16 runs,
 one per direction and amplitude, shared by every cylinder and average) and the software around
 it (``rest_s``: drivers, wire protocols, emulators, stage moves, digitiser noise/quantisation),
@@ -20,12 +24,19 @@ from instruments.burst import Burst
 from instruments.interfaces import AcquisitionConfig, BurstConfig
 
 F_IN_HZ = {"ltr": 8.92e3, "rtl": 6.63e3}
-AMPLITUDES_VPP = tuple(float(a) for a in np.geomspace(0.05, 10.0, 8))
+#: peak actuator displacement (m), as in a protocol
+AMPLITUDES_M = tuple(float(a) for a in np.geomspace(0.025e-6, 5.0e-6, 8))
 N_AVERAGES = 4
 RATE_HZ = 200e3
 DURATION_S = 30e-3
 PRETRIGGER = 100
 VIBROMETER_RANGE = "VD-09 50mm/s/V"
+
+
+def generator_Vpp(world: Any, displacement_m: float) -> float:
+    """Generator Vpp for a peak actuator displacement, through the simulated bench's actuator
+    (to 12 digits: 5 um is 10 Vpp, the generator's limit, not one rounding above it)."""
+    return float(f"{2.0 * float(world.config.actuator.generator_peak_V(displacement_m)):.12g}")
 
 
 def scan(rig: BenchInstruments) -> dict[str, Any]:
@@ -48,12 +59,13 @@ def scan(rig: BenchInstruments) -> dict[str, Any]:
     rig.vibrometer.set_velocity_range(VIBROMETER_RANGE)  # 10 Vpp gives ~0.1 m/s near the piezo
     sens = rig.vibrometer.sensitivity_m_per_s_per_V()
     n_points = 0
-    energy = np.zeros((2, len(AMPLITUDES_VPP), len(positions)))
+    energy = np.zeros((2, len(AMPLITUDES_M), len(positions)))
     try:
         stage.home()
         for d, direction in enumerate(("ltr", "rtl")):
             channel = world.config.direction_channel[direction]
-            for a, amp in enumerate(AMPLITUDES_VPP):
+            for a, amp_m in enumerate(AMPLITUDES_M):
+                amp = generator_Vpp(world, amp_m)
                 gen.configure_burst(
                     channel,
                     BurstConfig(shape=Burst(F_IN_HZ[direction], cycles=5), amplitude_Vpp=amp),
@@ -83,18 +95,6 @@ def run() -> dict[str, Any]:
     result = scan(rig)
     wall = time.perf_counter() - t0
     stats = world.dem_stats
-    energy = result["energy"]
-    table = []
-    for d, direction in enumerate(("ltr", "rtl")):
-        for a, amp in enumerate(AMPLITUDES_VPP):
-            table.append(
-                {
-                    "direction": direction,
-                    "amplitude_Vpp": amp,
-                    "far/near energy": float(energy[d, a, -1 if d == 0 else 0])
-                    / max(float(energy[d, a, 0 if d == 0 else -1]), 1e-300),
-                }
-            )
     return {
         "wall_s": wall,
         "dem_s": stats.dem_s,
@@ -105,5 +105,25 @@ def run() -> dict[str, Any]:
         "acquisitions": world.n_acquisitions,
         "simulated_bench_s": world.clock.now(),
         "target_s": 20.0,
-        "table": table,
+        "table": amplitude_table(world, result["energy"]),
     }
+
+
+def amplitude_table(world: Any, energy: np.ndarray) -> list[dict[str, Any]]:
+    """One row per direction and amplitude: the peak displacement in um (the protocol's unit),
+    the generator Vpp that played it, and the far/near energy ratio; ``energy``: ``[2, A, C]``
+    (direction, amplitude, cylinder)."""
+    rows = []
+    for d, direction in enumerate(("ltr", "rtl")):
+        far, near = (-1, 0) if d == 0 else (0, -1)
+        for a, amp_m in enumerate(AMPLITUDES_M):
+            rows.append(
+                {
+                    "direction": direction,
+                    "amplitude_um": amp_m * 1e6,
+                    "generator_Vpp": generator_Vpp(world, amp_m),
+                    "far/near energy": float(energy[d, a, far])
+                    / max(float(energy[d, a, near]), 1e-300),
+                }
+            )
+    return rows
