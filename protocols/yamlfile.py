@@ -311,11 +311,11 @@ def validate(doc: YamlDoc, model: type[M], context: dict[str, Any] | None = None
             msg = _unknown_key(doc.data, model, raw_loc, errors)
         elif err["type"] == "missing":
             msg = "missing (required)"
-        elif err["type"] == "literal_error" and isinstance(err.get("input"), str):
-            msg += _did_you_mean(err["input"], re.findall(r"'([^']*)'", str(err["msg"])))
         msg = msg.splitlines()[0]
         if err["type"] not in ("value_error", "assertion_error", "extra_forbidden", "missing"):
             msg += f", got {_shown(err.get('input'))}"  # pydantic's own checks omit the value
+        if err["type"] == "literal_error" and isinstance(err.get("input"), str):
+            msg += _did_you_mean(err["input"], re.findall(r"'([^']*)'", str(err["msg"])))
         # a model-level check names its field at the start of the message: "field: why"
         head, sep, tail = msg.partition(": ")
         if sep and " " not in head and isinstance(doc.data, dict):

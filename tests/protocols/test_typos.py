@@ -56,7 +56,7 @@ acquisition:
         (
             "  ltr: {",
             "  ltrr: {",
-            "p.yaml:4: burst.ltrr: Input should be 'ltr' or 'rtl'; did you mean 'ltr'?",
+            "p.yaml:4: burst.ltrr: Input should be 'ltr' or 'rtl', got 'ltrr'; did you mean 'ltr'?",
         ),
     ],
 )
