@@ -40,6 +40,7 @@ __all__ = [
     "parse_yaml",
     "read_yaml_data",
     "read_yaml_text",
+    "unknown_key_message",
     "validate",
 ]
 
@@ -308,7 +309,7 @@ def validate(doc: YamlDoc, model: type[M], context: dict[str, Any] | None = None
         for prefix in ("Value error, ", "Assertion failed, "):
             msg = msg.removeprefix(prefix)
         if err["type"] == "extra_forbidden":
-            msg = _unknown_key(doc.data, model, raw_loc, errors)
+            msg = unknown_key_message(doc.data, model, raw_loc, errors)
         elif err["type"] == "missing":
             msg = "missing (required)"
         msg = msg.splitlines()[0]
@@ -360,9 +361,13 @@ def _did_you_mean(word: str, allowed: Sequence[str]) -> str:
     return f"; did you mean {close[0]!r}?" if close else ""
 
 
-def _unknown_key(data: Any, model: type[BaseModel], loc: Path_, errors: Sequence[Any]) -> str:
-    """``unknown key 'frequncy'; did you mean 'f_center'? (allowed here: ...)``: the closest
-    allowed key not written yet, else the one required key missing beside it."""
+def unknown_key_message(
+    data: Any, model: type[BaseModel], loc: Sequence[str | int], errors: Sequence[Any]
+) -> str:
+    """For pydantic's ``extra_forbidden`` error at ``loc`` (``errors``: all of the validation's
+    errors): ``unknown key 'frequncy'; did you mean 'f_center'?`` (the closest allowed key not
+    written yet, else the one required key missing beside it, else a close one written too),
+    or the keys allowed there when none is close."""
     key = str(loc[-1])
     allowed = _keys_at(model, loc[:-1])
     if not allowed:

@@ -286,8 +286,10 @@ class _FieldError(ValueError):
         super().__init__(f"{field}: {message}")
 
 
-def _first_error(exc: ValidationError) -> str:
-    err = exc.errors()[0]
+def _first_error(exc: ValidationError, data: Any = None) -> str:
+    errors = exc.errors()
+    unknown = [e for e in errors if e.get("type") == "extra_forbidden"]
+    err = unknown[0] if unknown else errors[0]  # a misspelt key also leaves its field missing
     loc = ".".join(str(p) for p in err.get("loc", ()))
     msg = str(err.get("msg", "invalid"))
     msg = msg.removeprefix("Value error, ")
@@ -298,7 +300,9 @@ def _first_error(exc: ValidationError) -> str:
             else f"(top level): {msg}"
         )
     if err.get("type") == "extra_forbidden":
-        msg = "unknown key"
+        from protocols.yamlfile import unknown_key_message
+
+        msg = unknown_key_message(data, ChainSpec, tuple(err["loc"]), errors)
     return f"{loc}: {msg}"
 
 
@@ -309,7 +313,7 @@ def chain_spec_from_dict(data: Any, source: str = "chain") -> ChainSpec:
     try:
         return ChainSpec.model_validate(data)
     except ValidationError as exc:
-        raise ChainFileError(f"{source}: {_first_error(exc)}") from None
+        raise ChainFileError(f"{source}: {_first_error(exc, data)}") from None
 
 
 def load_chain_spec(path: str | Path) -> ChainSpec:

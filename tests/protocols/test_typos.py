@@ -95,3 +95,27 @@ def test_nested_typo_through_run_protocol(tmp_path: Path, capsys) -> None:  # ty
         f"run_protocol: error: {proto}:4: burst.ltr.frequncy: unknown key 'frequncy'; "
         "did you mean 'f_center'?"
     )
+
+
+def test_typo_in_a_chain_setting_through_biafc_simulate(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
+    from daq.cli.biafc import main
+
+    out = tmp_path / "sim.h5"
+    argv = ["simulate", "--direction", "ltr", "--amplitude", "1 um", "--set", "diamter=12mm"]
+    assert main([*argv, "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.endswith(
+        "diamter: unknown key 'diamter'; did you mean 'diameter'? (it is given too)"
+    )
+    assert len(err.splitlines()) == 1 and not out.exists()
+
+
+def test_typo_in_a_chain_file(tmp_path: Path) -> None:
+    from sim_backend.dem.spec import ChainFileError, default_chain_path, load_chain_spec
+
+    f = tmp_path / "chain.yaml"
+    f.write_text(default_chain_path().read_text().replace("preload:", "preloda:"))
+    with pytest.raises(
+        ChainFileError, match=r"preloda: unknown key 'preloda'; did you mean 'preload'\?$"
+    ):
+        load_chain_spec(f)
