@@ -17,7 +17,8 @@ import os, sys, time
 t0 = time.perf_counter()
 from daq.cli import compile_notice
 shown = compile_notice.CompileNotice.__call__
-HEAVY = ("numba", "sim_backend.dem.kernel", "sim_backend.dem.simulation", "scipy.interpolate")
+HEAVY = ("numba", "sim_backend.dem.kernel", "sim_backend.dem.simulation", "scipy.interpolate",
+         "scipy.optimize", "scipy.special", "scipy.linalg")
 
 def call(self, phase, *args):
     shown(self, phase, *args)
