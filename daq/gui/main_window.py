@@ -101,6 +101,14 @@ class MainWindow(QMainWindow):
         self._dirty = False
         self._busy_connect = False
         self._pending_start: tuple[Path | None] | None = None
+        # the model (numba, the compiled kernel, the chain's tools) loads here, before the
+        # window turns, not on the event loop or beside it when the first run starts
+        import analysis.model_overlay  # noqa: F401
+        import sim_backend.dem
+
+        for name in sim_backend.dem.__all__:
+            getattr(sim_backend.dem, name)
+
         self._build()
         self._redraw_timer = QTimer(self)
         self._redraw_timer.setInterval(REDRAW_MS)

@@ -145,3 +145,14 @@ def test_the_registry_is_built_on_first_use_not_at_import() -> None:
         "assert 'pint' in sys.modules"
     )
     subprocess.run([sys.executable, "-c", code], check=True, cwd=ROOT)
+
+
+def test_pint_is_read_without_dask() -> None:
+    """pint imports dask when it is installed (array support not used here): 0.1 s more at the
+    first quantity and a larger heap for every later garbage collection; dask stays importable."""
+    code = (
+        "import sys; from instruments.units import parse_quantity; parse_quantity('1 um', "
+        "'length'); assert 'pint' in sys.modules and 'dask' not in sys.modules, 'dask loaded'; "
+        "import importlib.util; assert importlib.util.find_spec('dask') is not None"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True, cwd=ROOT)
