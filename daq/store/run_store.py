@@ -26,6 +26,7 @@ import numpy as np
 from daq.store.recover import clear_consistency_flags
 from daq.store.resume_check import bench_differences
 from protocols.bench import BenchFile
+from protocols.legacy import upgrade_protocol_text
 from protocols.runfile import ChainInfo, RunFileWriter, ScanSpec
 from protocols.schema import ProtocolFile, parse_protocol
 from protocols.yamlfile import ConfigError
@@ -171,6 +172,13 @@ def stored_seed(path: Path) -> int | None:
     return None if v is None else int(v)
 
 
+def parse_stored_protocol(protocol_yaml: str, path: Path) -> ProtocolFile:
+    """The protocol text stored in run file ``path``, validated; a run started before
+    amplitudes had to say Vpp or Vpk stored a bare ``2 V``, which then meant Vpp and is read so
+    (:mod:`protocols.legacy`). :class:`ConfigError` when it cannot be read."""
+    return parse_protocol(upgrade_protocol_text(protocol_yaml), f"{path}:protocol_yaml")
+
+
 def stored_request(path: Path) -> tuple[ProtocolFile, BenchFile]:
     """The protocol and the bench a run file was started with (``--resume RUN.h5`` alone),
     parsed from the texts stored in it; :class:`StoreError` (one line) when they cannot be."""
@@ -184,7 +192,7 @@ def stored_request(path: Path) -> tuple[ProtocolFile, BenchFile]:
     if not protocol_yaml.strip():
         raise StoreError(f"--resume: {path} holds no protocol; give the protocol file too")
     try:
-        pf = parse_protocol(protocol_yaml, f"{path}:protocol_yaml")
+        pf = parse_stored_protocol(protocol_yaml, path)
         bf = parse_bench(bench_yaml, f"{path}:bench_yaml")
     except ConfigError as exc:
         raise StoreError(f"--resume: the request stored in {path} is unreadable ({exc})") from None
@@ -237,7 +245,7 @@ def check_resume(
     if (status.decode() if isinstance(status, bytes) else str(status)) == "complete":
         raise StoreError(_complete(path))
     try:
-        stored = parse_protocol(text["protocol_yaml"], f"{path}:protocol_yaml")
+        stored = parse_stored_protocol(text["protocol_yaml"], path)
     except ConfigError as exc:
         raise StoreError(f"--resume: the protocol stored in {path} is unreadable ({exc})") from None
     if stored.protocol.model_dump() != pf.protocol.model_dump():
