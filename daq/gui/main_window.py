@@ -26,7 +26,7 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from daq.gui import refcount_guard
+from daq.gui import gui_gc, refcount_guard
 from daq.gui.adapter import EngineEventAdapter
 from daq.gui.background import BackgroundCall
 from daq.gui.live_data import LiveData
@@ -84,6 +84,7 @@ class MainWindow(QMainWindow):
     ) -> None:
         super().__init__()
         refcount_guard.install()
+        gui_gc.install()  # garbage collected on this thread only, never in a worker
         self.setWindowTitle("biafc-lab — bench")
         self.resize(1500, 950)
         self._assembler = assembler or _default_assembler

@@ -25,10 +25,14 @@ def _collect_qt_garbage_on_the_gui_thread() -> Iterator[None]:
     GUI thread, before and after every GUI test. Left for later, the collector ran it on
     whichever thread allocated next: a worker of the next test, whose ~QObject then waited for
     the GIL while holding Qt's mutex, and the GUI thread, deleting widgets, waited for that
-    mutex (the full suite hung three times in test_window; gdb: gc_collect_main on the worker)."""
+    mutex (the full suite hung three times in test_window; gdb: gc_collect_main on the worker).
+    A window also switches automatic collection to a GUI-thread timer (daq.gui.gui_gc): give
+    it back after the test so the rest of the session collects."""
+    from daq.gui import gui_gc
+
     gc.collect()
     yield
-    gc.collect()
+    gui_gc.uninstall()  # collects here, then automatic collection is back on
 
 
 @pytest.fixture
