@@ -92,11 +92,20 @@ def test_a_killed_worker_loses_only_its_tasks_and_the_study_completes_the_same(
     def kill_one(i: int, res: Any, n_done: int) -> None:
         if killed:
             return
-        busy = {w: keys for w, keys in client.processing().items() if keys}
+        # what each worker holds of this study: tasks running or queued there, and results
+        # finished there but not yet written (under load the workers may have run every task
+        # in flight before this callback; a result in a dead worker's memory is lost too and
+        # run again). The result in hand came from another worker: the victim holds no part
+        # of it, so whatever it holds must be rerun.
+        live = set(client.futures)
+        held: dict[str, set[str]] = {w: set() for w in client.scheduler_info()["workers"]}
+        for table_ in (client.processing(), client.has_what()):
+            for w, keys in table_.items():
+                held.setdefault(w, set()).update(k for k in keys if k in live)
         pids = client.run(os.getpid)
         others = [w for w in pids if not res.worker.endswith(f":{pids[w]}")]
-        victim = next((w for w in others if w in busy), others[0])
-        lost.append(len(busy.get(victim, ())))
+        victim = max(others, key=lambda w: len(held.get(w, ())))
+        lost.append(len(held.get(victim, ())))
         os.kill(pids[victim], signal.SIGKILL)
         killed.append(pids[victim])
 
