@@ -11,11 +11,18 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, ClassVar, Literal, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationInfo,
+    field_validator,
+    model_validator,
+)
 
 from instruments.units import (
     Duration,
@@ -32,8 +39,28 @@ from protocols.yamlfile import YamlDoc, load_yaml, parse_yaml, validate
 __all__ = ["BenchFile", "BenchSpec", "default_bench_path", "load_bench", "parse_bench"]
 
 
+class Bound(NamedTuple):
+    """The range a bench number must lie in: ``low < value <= high`` (``low <= value`` when
+    not ``low_open``), SI; ``dimension`` and ``suffix`` say how the message shows it."""
+
+    low: float
+    high: float
+    dimension: str
+    low_open: bool = True
+    suffix: str = ""
+
+
 class _Model(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
+
+    #: field -> the range its value must lie in (SI; checked once its unit is read)
+    BOUNDS: ClassVar[dict[str, Bound]] = {}
+
+    @field_validator("*")
+    @classmethod
+    def _bounded(cls, v: Any, info: ValidationInfo) -> Any:
+        bound = cls.BOUNDS.get(info.field_name or "")
+        return v if bound is None else _in_range(v, *bound)
 
 
 #: serial line speed of Zaber ASCII devices and the Polytec OFV-5000 as shipped (baud)
@@ -73,20 +100,11 @@ class GeneratorSpec(_Model):
     timeout: Duration = 5.0
     baud_rate: int | None = Field(default=None, gt=0)  # only for a serial (ASRL) resource
 
-    @field_validator("max_amplitude")
-    @classmethod
-    def _max_amplitude(cls, v: float) -> float:
-        return _in_range(v, 0.0, 20.0, "voltage", suffix="pp")
-
-    @field_validator("sample_rate")
-    @classmethod
-    def _sample_rate(cls, v: float) -> float:
-        return _in_range(v, 0.0, 1e9, "sample_rate")
-
-    @field_validator("timeout")
-    @classmethod
-    def _timeout(cls, v: float) -> float:
-        return _in_range(v, 0.0, 600.0, "time")
+    BOUNDS: ClassVar[dict[str, Bound]] = {
+        "max_amplitude": Bound(0.0, 20.0, "voltage", suffix="pp"),
+        "sample_rate": Bound(0.0, 1e9, "sample_rate"),
+        "timeout": Bound(0.0, 600.0, "time"),
+    }
 
 
 class AmplifierSpec(_Model):
@@ -116,15 +134,10 @@ class AmplifierSpec(_Model):
             raise ValueError(f"{v!r} is not allowed: give a force above 0 N/V, up to 1 MN/V")
         return force
 
-    @field_validator("gain")
-    @classmethod
-    def _gain(cls, v: float) -> float:
-        return _in_range(v, 0.0, 1e4, "")
-
-    @field_validator("piezo_max")
-    @classmethod
-    def _piezo_max(cls, v: float) -> float:
-        return _in_range(v, 0.0, 10e3, "voltage")
+    BOUNDS: ClassVar[dict[str, Bound]] = {
+        "gain": Bound(0.0, 1e4, ""),
+        "piezo_max": Bound(0.0, 10e3, "voltage"),
+    }
 
 
 class VibrometerSpec(_Model):
@@ -170,20 +183,11 @@ class StageSpec(_Model):
                   for x in v)  # fmt: skip
         return lo, hi
 
-    @field_validator("speed")
-    @classmethod
-    def _speed(cls, v: float) -> float:
-        return _in_range(v, 0.0, 1.0, "velocity")
-
-    @field_validator("settle")
-    @classmethod
-    def _settle(cls, v: float) -> float:
-        return _in_range(v, 0.0, 60.0, "time", low_open=False)
-
-    @field_validator("timeout")
-    @classmethod
-    def _timeout(cls, v: float) -> float:
-        return _in_range(v, 0.0, 3600.0, "time")
+    BOUNDS: ClassVar[dict[str, Bound]] = {
+        "speed": Bound(0.0, 1.0, "velocity"),
+        "settle": Bound(0.0, 60.0, "time", low_open=False),
+        "timeout": Bound(0.0, 3600.0, "time"),
+    }
 
     @model_validator(mode="after")
     def _order(self) -> StageSpec:
@@ -214,15 +218,11 @@ class DaqSpec(_Model):
     velocity_range: Voltage = 10.0
     reference_range: Voltage = 10.0
 
-    @field_validator("max_rate")
-    @classmethod
-    def _max_rate(cls, v: float) -> float:
-        return _in_range(v, 0.0, 100e6, "sample_rate")
-
-    @field_validator("velocity_range", "reference_range")
-    @classmethod
-    def _input_range(cls, v: float) -> float:
-        return _in_range(v, 0.0, 100.0, "voltage")
+    BOUNDS: ClassVar[dict[str, Bound]] = {
+        "max_rate": Bound(0.0, 100e6, "sample_rate"),
+        "velocity_range": Bound(0.0, 100.0, "voltage"),
+        "reference_range": Bound(0.0, 100.0, "voltage"),
+    }
 
 
 class PositionGrid(_Model):
@@ -253,15 +253,14 @@ class SimulationSpec(_Model):
     dem_integrator: str = "default"
     faults: dict[str, Any] = Field(default_factory=dict)
 
-    @field_validator("speedup")
-    @classmethod
-    def _speedup(cls, v: float) -> float:
-        return _in_range(v, 0.0, 1.0e6, "", low_open=False)
-
-    @field_validator("spot_tolerance")
-    @classmethod
-    def _spot_tolerance(cls, v: float) -> float:
-        return _in_range(v, 0.0, 0.1, "length")
+    BOUNDS: ClassVar[dict[str, Bound]] = {
+        "speedup": Bound(0.0, 1.0e6, "", low_open=False),
+        "spot_tolerance": Bound(0.0, 0.1, "length"),
+        "vibrometer_full_scale": Bound(0.0, 100.0, "voltage"),
+        "vibrometer_noise": Bound(0.0, 10.0, "velocity", low_open=False),
+        "digitiser_noise": Bound(0.0, 10.0, "voltage", low_open=False),
+        "dem_duration": Bound(0.0, 10.0, "time"),
+    }
 
     @field_validator("stage_travel")
     @classmethod
@@ -271,26 +270,6 @@ class SimulationSpec(_Model):
         if not lo < hi:
             raise ValueError("give [low, high] with low < high")
         return lo, hi
-
-    @field_validator("vibrometer_full_scale")
-    @classmethod
-    def _full_scale(cls, v: float) -> float:
-        return _in_range(v, 0.0, 100.0, "voltage")
-
-    @field_validator("vibrometer_noise")
-    @classmethod
-    def _vibrometer_noise(cls, v: float) -> float:
-        return _in_range(v, 0.0, 10.0, "velocity", low_open=False)
-
-    @field_validator("digitiser_noise")
-    @classmethod
-    def _digitiser_noise(cls, v: float) -> float:
-        return _in_range(v, 0.0, 10.0, "voltage", low_open=False)
-
-    @field_validator("dem_duration")
-    @classmethod
-    def _dem_duration(cls, v: float) -> float:
-        return _in_range(v, 0.0, 10.0, "time")
 
 
 class BenchSpec(_Model):
