@@ -79,7 +79,9 @@ class _Connected(Exception):
     """Raised by the stand-in for daq.connect.connect_bench: an instrument would be opened."""
 
 
-def _tree(root: Path) -> dict[str, tuple[int, int]]:
+def tree(root: Path) -> dict[str, tuple[int, int]]:
+    """Every path under ``root`` with its size and mtime: compared before and after a case
+    to see that nothing was written."""
     out: dict[str, tuple[int, int]] = {}
     for dirpath, dirnames, filenames in os.walk(root):
         for name in dirnames + filenames:
@@ -120,7 +122,7 @@ def run_case(
 
     monkeypatch.setattr(daq.connect, "connect_bench", forbidden)
     monkeypatch.chdir(folder)
-    before = _tree(folder)
+    before = tree(folder)
     prog, *argv = case.argv
     main = _main(prog)
     out, err = io.StringIO(), io.StringIO()
@@ -138,7 +140,7 @@ def run_case(
             escaped = traceback.format_exc()
         seconds = time.perf_counter() - t0
     peak = memory.peak
-    after = _tree(folder)
+    after = tree(folder)
     written = sorted(p for p, st in after.items() if before.get(p) != st)
     return Outcome(code, out.getvalue(), err.getvalue(), escaped, seconds, peak,
                    bool(connected), written)  # fmt: skip

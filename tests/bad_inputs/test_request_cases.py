@@ -9,7 +9,6 @@ folder is unchanged: no run file, no RUN.log, no lock, no folder) and within 2 s
 from __future__ import annotations
 
 import json
-import os
 import socket
 import subprocess
 import sys
@@ -25,35 +24,11 @@ import daq.connect
 from daq.cli import run_protocol as rp
 from protocols.bench import default_bench_path, load_bench
 from protocols.runfile import ChainInfo, ScanSpec
+from tests.bad_inputs.runner import tree
+from tests.engine.helpers import PROTOCOL
 
 #: every refusal within this wall time (s)
 MAX_SECONDS = 2.0
-
-PROTOCOL = """\
-name: fake_scan
-directions: both
-burst:
-  ltr: {f_center: 8 kHz, cycles: 5}
-  rtl: {f_center: 6 kHz, cycles: 5}
-amplitudes: [1 Vpp, 2 Vpp]
-cylinders: [1, 2, 3]
-averages: 2
-acquisition: {rate: 100 kS/s, duration: 2 ms, pre_trigger: 0.2 ms}
-settle: 5 ms
-order: [direction, amplitude, cylinder]
-on_point_failure: continue
-retries: 2
-"""
-
-
-def _tree(root: Path) -> dict[str, tuple[int, int]]:
-    out: dict[str, tuple[int, int]] = {}
-    for dirpath, dirnames, filenames in os.walk(root):
-        for name in dirnames + filenames:
-            p = Path(dirpath) / name
-            st = p.lstat()
-            out[str(p.relative_to(root))] = (st.st_size, st.st_mtime_ns)
-    return out
 
 
 @pytest.fixture
@@ -70,7 +45,7 @@ def refused(
     monkeypatch.chdir(tmp_path)
 
     def run(argv: list[str]) -> str:
-        before = _tree(tmp_path)
+        before = tree(tmp_path)
         capsys.readouterr()
         t0 = time.monotonic()
         code = rp.main(argv)
@@ -81,7 +56,7 @@ def refused(
         assert code == 2, f"exit {code}: {err}"
         assert len(err.splitlines()) == 1, err
         assert err.startswith("run_protocol: error: "), err
-        assert _tree(tmp_path) == before, "something was written"
+        assert tree(tmp_path) == before, "something was written"
         assert seconds < MAX_SECONDS, f"{seconds:.2f} s"
         return err.removeprefix("run_protocol: error: ")
 

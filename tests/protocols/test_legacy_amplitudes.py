@@ -14,7 +14,8 @@ from protocols.bench import load_bench
 from protocols.legacy import upgrade_protocol_text
 from protocols.schema import parse_protocol
 from protocols.yamlfile import ConfigError
-from tests.bad_inputs.test_request_cases import PROTOCOL, _run_file
+from tests.bad_inputs.test_request_cases import _run_file
+from tests.engine.helpers import PROTOCOL
 
 OLD = PROTOCOL.replace("[1 Vpp, 2 Vpp]", "[1 V, 2 V]")
 
