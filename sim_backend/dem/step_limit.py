@@ -8,16 +8,21 @@ constant matrix ``P(h)`` acting on the modal state ``(q, p)`` of the chain ([2D,
 The step is stable when the spectral radius ``rho(P(h)) <= 1`` (the map is symplectic: stable
 eigenvalues lie on the unit circle; an unstable one grows by ``rho`` per step).
 
-How it is computed, in about a millisecond per step and overlap on the default chain (D = 124):
-a kick acts only through the primary masses (:func:`_step_map`), and every splitting here is
-symmetric, so its step map ``M = [[A, B], [C, A^T]]`` is time-reversible as well as symplectic:
-``R M R = M^-1`` with ``R = diag(I, -I)``. Then ``M + M^-1 = diag(2A, 2A^T)``, so the eigenvalues
-of ``M`` are the pairs ``lambda = c +- sqrt(c^2 - 1)`` of the eigenvalues ``c`` of the [D, D]
-position block ``A``: one eigenvalue problem of size D instead of 2D. ``B`` is symmetric, and
-when it is positive definite (small steps), ``A B`` is symmetric too, so ``L^-1 A L``
-(``B = L L^T``) is a symmetric matrix with the same ``c``: real, found by a symmetric solver,
-and the step is stable exactly when they all lie in [-1, 1]. (The dense 2D x 2D eigenvalues
-agree to round-off: ``tests/dem/test_setup_cost.py``.)
+How it is computed, in about 0.4 ms per step and overlap on the default chain (D = 124), the
+overlaps of a scan together: a kick acts only through the primary masses and couples a cylinder
+to its neighbours only, so the map's position blocks are built by a compiled kernel on the band
+that a column can reach (:mod:`sim_backend.dem.step_map`, all overlaps in one call; the numpy
+:func:`_step_map` builds the whole map for a splitting that is not symmetric). Every splitting
+here is symmetric, so its step map ``M = [[A, B], [C, A^T]]`` is time-reversible as well as
+symplectic: ``R M R = M^-1`` with ``R = diag(I, -I)``. Then ``M + M^-1 = diag(2A, 2A^T)``, so
+the eigenvalues of ``M`` are the pairs ``lambda = c +- sqrt(c^2 - 1)`` of the eigenvalues ``c``
+of the [D, D] position block ``A``: one eigenvalue problem of size D instead of 2D. ``B`` is
+symmetric, and when it is positive definite (small steps), ``A B`` is symmetric too, so
+``L^-1 A L`` (``B = L L^T``) is a symmetric matrix with the same ``c``: real, found by a symmetric
+solver, and the step is stable exactly when they all lie in [-1, 1], i.e. when ``B - A B`` and
+``B + A B`` are positive definite: two Cholesky factorisations (LAPACK ``dpotrf``) per overlap,
+the eigenvalues only when one fails. (The dense 2D x 2D eigenvalues agree to round-off:
+``tests/dem/test_setup_cost.py``.)
 
 The largest stable step ``h_max`` is the smallest ``h`` with ``rho(P(h)) > 1 + tol``, found by a
 geometric scan from ``0.25 pi / w_top`` upwards (ratio 1.08) and a bisection to 0.2 %. For the
@@ -249,11 +254,17 @@ def _radius_from_cosines(c: NDArray[Any]) -> float:
 
 
 def _window_radius(win: _Window, integrator: str, h: float, k: float) -> float:
-    Q, P = _step_map(win, integrator, h, k)
-    D = Q.shape[0]
     if not _palindromic(integrator):  # not time-reversible: the whole map's eigenvalues
+        Q, P = _step_map(win, integrator, h, k)
         return float(np.abs(np.linalg.eigvals(np.vstack([Q, P]))).max())
-    A, B = Q[:, :D], Q[:, D:]
+    A, B = _position_blocks(win, integrator, h, np.array([k]))
+    return _radius_from_blocks(A[0], B[0])
+
+
+def _radius_from_blocks(A: NDArray[np.float64], B: NDArray[np.float64]) -> float:
+    """Spectral radius of a time-reversible step map from its position blocks ``A``, ``B``
+    ([D, D]): by the symmetric ``L^-1 A L`` when ``B = L L^T`` > 0, else by the eigenvalues
+    of ``A`` (module docstring)."""
     Bs = 0.5 * (B + B.T)
     try:
         L = np.linalg.cholesky(Bs)
@@ -266,34 +277,97 @@ def _window_radius(win: _Window, integrator: str, h: float, k: float) -> float:
 #: stable means every ``c`` in [-C_TOL, C_TOL]: the ``c`` of ``rho = 1 + STABILITY_TOL``
 _C_TOL = 0.5 * ((1.0 + STABILITY_TOL) + 1.0 / (1.0 + STABILITY_TOL))
 
+_STAGES: dict[tuple[str, float, int], tuple[Any, ...]] = {}
 
-def _window_stable(win: _Window, integrator: str, h: float, k: float) -> bool:
-    """Whether ``rho <= 1 + STABILITY_TOL`` on one window, by factorisations only where it can:
-    with ``B = L L^T`` the ``c`` lie in [-C, C] exactly when ``C B - A B`` and ``C B + A B`` are
-    positive definite (two Cholesky factorisations, a third of the eigenvalues' cost); anything
-    else (``B`` not positive definite, a factorisation that fails) is decided by the eigenvalues."""
-    Q, P = _step_map(win, integrator, h, k)
-    D = Q.shape[0]
+
+def _stages(
+    win: _Window, integrator: str, h: float
+) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.float64]]:
+    """The splitting's stages at step ``h`` (s) on ``win`` for :mod:`sim_backend.dem.step_map`:
+    the drift coefficients of its distinct drift lengths ([S, D, 4]), which of them each drift
+    uses ([m + 1]) and the kick lengths ``b_s h`` ([m], s). Computed once per (window,
+    integrator, step), not once per stiffness."""
+    key = (integrator, h, id(win))
+    hit = _STAGES.get(key)
+    if hit is not None and hit[0] is win:
+        return hit[1], hit[2], hit[3]
+    from sim_backend.dem.simulation import INTEGRATORS
+
+    _, a_w, b_w = INTEGRATORS[integrator]
+    sizes = list(dict.fromkeys(a_w))
+    om = win.omega.ravel()
+    zeta = np.zeros_like(om)
+    coef = np.stack([drift_coefficients(om, zeta, a * h) for a in sizes])
+    idx = np.array([sizes.index(a) for a in a_w], dtype=np.int64)
+    kick = np.asarray(b_w, dtype=np.float64) * h
+    if len(_STAGES) > 64:
+        _STAGES.clear()
+    _STAGES[key] = (win, coef, idx, kick)  # the window is held: its id is not reused meanwhile
+    return coef, idx, kick
+
+
+def _position_blocks(
+    win: _Window,
+    integrator: str,
+    h: float,
+    stiffness: NDArray[np.float64],
+    symmetric_b: bool = False,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Position blocks ``A``, ``B`` ([M, D, D]) of the step maps for M contact stiffnesses (N/m),
+    compiled (:func:`sim_backend.dem.step_map.position_blocks`)."""
+    from sim_backend.dem.step_map import position_blocks
+
+    coef, idx, kick = _stages(win, integrator, h)
+    return position_blocks(
+        win.phi, coef, idx, kick, stiffness, win.left, win.right, symmetric_b=symmetric_b
+    )
+
+
+def _window_stable_many(
+    win: _Window, integrator: str, h: float, stiffness: NDArray[np.float64]
+) -> list[bool]:
+    """Whether ``rho <= 1 + STABILITY_TOL`` on one window, for each of M contact stiffnesses
+    (N/m), by factorisations only where it can: the ``c`` lie in [-C, C] exactly when ``C B - A B``
+    and ``C B + A B`` are positive definite (two Cholesky factorisations, LAPACK's ``dpotrf``:
+    its ``info`` says, no exception), which also makes ``B = (C B - A B + C B + A B) / 2C``
+    positive definite, the premise of the equivalence; anything else (a factorisation that
+    fails) is decided by the eigenvalues."""
     if not _palindromic(integrator):
-        return float(np.abs(np.linalg.eigvals(np.vstack([Q, P]))).max()) <= 1.0 + STABILITY_TOL
-    A, B = Q[:, :D], Q[:, D:]
-    Bs = 0.5 * (B + B.T)
-    AB = A @ Bs
-    AB = 0.5 * (AB + AB.T)
-    try:
-        np.linalg.cholesky(Bs)
-        np.linalg.cholesky(_C_TOL * Bs - AB)
-        np.linalg.cholesky(_C_TOL * Bs + AB)
-    except np.linalg.LinAlgError:
-        return _window_radius(win, integrator, h, k) <= 1.0 + STABILITY_TOL
-    return True
+        return [_window_radius(win, integrator, h, k) <= 1.0 + STABILITY_TOL for k in stiffness]
+    from scipy.linalg.lapack import dpotrf
+
+    A, Bs = _position_blocks(win, integrator, h, stiffness, symmetric_b=True)
+    AB = np.matmul(A, Bs)  # symmetric to round-off; dpotrf reads one triangle
+    out = []
+    for o in range(stiffness.size):
+        cb = _C_TOL * Bs[o]
+        ok = (
+            dpotrf(np.subtract(cb, AB[o]).T, lower=1, clean=0, overwrite_a=1)[1] == 0
+            and dpotrf(np.add(cb, AB[o], out=cb).T, lower=1, clean=0, overwrite_a=1)[1] == 0
+        )
+        out.append(ok or _radius_from_blocks(A[o], Bs[o]) <= 1.0 + STABILITY_TOL)
+    return out
+
+
+def _stable_many(
+    chain: Chain, integrator: str, h: float, overlaps_m: Sequence[float]
+) -> list[bool]:
+    """``spectral_radius(...) <= 1 + STABILITY_TOL`` at each overlap (m), all at once (one
+    compiled call per window for all of them), decided by :func:`_window_stable_many`."""
+    if not overlaps_m:
+        return []
+    ks = np.array([contact_stiffness_N_per_m(chain, d) for d in overlaps_m])
+    out = [True] * ks.size
+    with one_blas_thread():
+        for w in _windows(chain):
+            for i, ok in enumerate(_window_stable_many(w, integrator, h, ks)):
+                out[i] = out[i] and ok
+    return out
 
 
 def _stable_at(chain: Chain, integrator: str, h: float, overlap_m: float) -> bool:
-    """``spectral_radius(...) <= 1 + STABILITY_TOL``, decided by :func:`_window_stable`."""
-    k = contact_stiffness_N_per_m(chain, overlap_m)
-    with one_blas_thread():
-        return all(_window_stable(w, integrator, h, k) for w in _windows(chain))
+    """``spectral_radius(...) <= 1 + STABILITY_TOL``, decided by :func:`_stable_many`."""
+    return _stable_many(chain, integrator, h, [overlap_m])[0]
 
 
 def spectral_radius(chain: Chain, integrator: str, h: float, overlap_m: float) -> float:
@@ -321,7 +395,7 @@ def is_stable(chain: Chain, integrator: str, h: float, overlap_m: float | None =
     key = (chain.spec.model_dump_json(), integrator, h, overlaps)
     hit = _STABLE_CACHE.get(key)
     if hit is None:
-        hit = all(_stable_at(chain, integrator, h, d) for d in overlaps)
+        hit = all(_stable_many(chain, integrator, h, overlaps))
         if len(_STABLE_CACHE) > 4096:
             _STABLE_CACHE.clear()
         _STABLE_CACHE[key] = hit
@@ -474,20 +548,19 @@ def stable_up_to(chain: Chain, integrator: str, h: float, overlap_m: float) -> b
     if overlap_m >= v.unstable_at_m:
         return False
     d = v.start_m if v.stable_to_m <= 0.0 else v.stable_to_m * RANGE_RATIO
-    changed = False
-    while True:
-        if d >= v.unstable_at_m:
-            break
-        v.evaluations += 1
-        changed = True
-        if not _stable_at(chain, integrator, h, d):
-            v.unstable_at_m = d
-            break
-        v.stable_to_m = d
+    grid = []  # the grid points still to check, up to the first at or above overlap_m
+    while d < v.unstable_at_m:
+        grid.append(d)
         if d >= overlap_m:
             break
         d *= RANGE_RATIO
-    if changed:
+    if grid:  # all at once (one compiled call), then in order up to the first unstable one
+        v.evaluations += len(grid)
+        for d, ok in zip(grid, _stable_many(chain, integrator, h, grid), strict=True):
+            if not ok:
+                v.unstable_at_m = d
+                break
+            v.stable_to_m = d
         _disk_store(key, v)
     if overlap_m <= v.stable_to_m:
         return True

@@ -142,14 +142,14 @@ def test_stability_check_runs_once_per_chain_and_step(
     monkeypatch.setenv("BIAFC_CACHE_DIR", str(tmp_path))
     monkeypatch.setattr(step_limit, "_RANGE_CACHE", {}, raising=False)
     monkeypatch.setattr(step_limit, "_STABLE_CACHE", {})
-    calls = []
-    stable_at = step_limit._stable_at
+    calls: list[float] = []  # one entry per overlap whose stability was computed
+    stable_many = step_limit._stable_many
 
-    def counting(*args: object, **kwargs: object) -> bool:
-        calls.append(args)
-        return stable_at(*args, **kwargs)  # type: ignore[arg-type]
+    def counting(chain: dem.Chain, integrator: str, h: float, overlaps: list[float]) -> list[bool]:
+        calls.extend(overlaps)
+        return stable_many(chain, integrator, h, overlaps)
 
-    monkeypatch.setattr(step_limit, "_stable_at", counting)
+    monkeypatch.setattr(step_limit, "_stable_many", counting)
     amplitudes = undamped.delta0_m * np.geomspace(0.05, 3.0, 24)
     drives = [dem.Drive("ltr", "displacement", float(a), burst=Burst(8.92e3)) for a in amplitudes]
     for d in drives:  # one key each, as the simulated bench's DEM runs are
@@ -312,3 +312,48 @@ def test_one_blas_thread_limits_scipys_blas_loaded_after_the_model() -> None:
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     seen = json.loads(out.stdout)
     assert seen and all(n == [1] * len(n) and n for n in seen), seen
+
+
+@pytest.mark.parametrize("integrator", ["blanes-moan4", "strang", "yoshida6"])
+def test_banded_position_blocks_equal_the_numpy_step_map(
+    undamped: dem.Chain, integrator: str
+) -> None:
+    """The compiled kernel (the band a column reaches, all stiffnesses at once) gives the position
+    rows of the numpy map, on the whole chain and on windows without end contacts, of one
+    cylinder, and of two."""
+    whole = step_limit._windows(undamped)[0]
+    windows = [
+        whole,
+        step_limit._Window(whole.phi[:7], whole.omega[:7], False, False),
+        step_limit._Window(whole.phi[3:5], whole.omega[3:5], False, True),
+        step_limit._Window(whole.phi[:1], whole.omega[:1], True, True),
+    ]
+    h = 3.0e-6
+    ks = np.array([step_limit.contact_stiffness_N_per_m(undamped, f * undamped.delta0_m)
+                   for f in (0.5, 1.0, 7.0)])  # fmt: skip
+    for win in windows:
+        A, B = step_limit._position_blocks(win, integrator, h, ks)
+        for o, k in enumerate(ks):
+            Q, _ = step_limit._step_map(win, integrator, h, float(k))
+            D = Q.shape[0]
+            scale = np.abs(Q).max()
+            assert np.abs(A[o] - Q[:, :D]).max() <= 1e-13 * scale
+            assert np.abs(B[o] - Q[:, D:]).max() <= 1e-13 * scale
+
+
+def test_scan_verdicts_equal_the_dense_eigenvalues_on_the_default_chain(
+    undamped: dem.Chain,
+) -> None:
+    """The verdicts of a batched scan (the 31-cylinder chain, D = 124, every overlap in one
+    compiled call) against the dense [2D, 2D] map's eigenvalues: stable steps, the narrow
+    unstable band of blanes-moan4 near 7.4 us and the steps beyond its limit."""
+    overlaps = [f * undamped.delta0_m for f in (1.0, 1.25**4, 1.25**7, 16.0)]
+    verdicts = set()
+    for h in (3.3333333333333337e-06, 6.5e-6, 7.4e-6, 8.1e-6, 9.0e-6):
+        got = step_limit._stable_many(undamped, "blanes-moan4", h, overlaps)
+        for ov, stable in zip(overlaps, got, strict=True):
+            k = step_limit.contact_stiffness_N_per_m(undamped, ov)
+            dense = np.abs(np.linalg.eigvals(_dense_step_map(undamped, "blanes-moan4", h, k)))
+            assert stable == (dense.max() <= 1.0 + step_limit.STABILITY_TOL), (h, ov / 1e-6)
+            verdicts.add(stable)
+    assert verdicts == {True, False}
