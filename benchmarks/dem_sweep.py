@@ -17,10 +17,14 @@ trajectories in all at every B; the better of 2 rounds),
 trajectories/s, the peak memory numpy allocated during a batch (``tracemalloc``, per
 trajectory); and two floors:
 
-- ``floor_flops_s``: the kernel's floating-point operations (``benchmarks.dem_vs_scipy.
+- ``floor_flops_s``: the kernel's floating-point operations (``benchmarks._floor.
   flops_per_step``, counted from its loops, recording included) for B trajectories over the
   machine's measured peak (independent multiply-adds at the SIMD width numba emits, 4 doubles,
   on every thread): the arithmetic floor of docs/performance.md, section 2;
+- ``floor_instr_s``: the instruction floor (``benchmarks._floor.instruction_floor``): the same
+  operations by class (multiply-adds, other vector operations, square roots) at the rates this
+  machine measures for each (four-lane vectors, every thread), per pass the larger of the
+  square-root unit's and the arithmetic ports' time, summed;
 - ``floor_lanes_s``: the kernel's own time for 16 trajectories (8 LTR + 8 RTL: two chunks of 8
   lanes, one per thread, far end recorded) times B / 16: the single-chunk kernel time scaled
   to B, i.e. what batching, output and the blocks cost on top of the kernel.
@@ -29,8 +33,10 @@ Time to 1e-6 and 1e-8 (:func:`accuracy_rows`): the sweep's hardest trajectory (L
 30 ms, on the benchmark chain (contact dashpot 0.005) and the default chain (dashpot off), the
 default scheme with midpoint and with Heun kicks at 2 us to 0.125 us against yoshida6 at
 15.625 ns; the cheapest rung under each target and the reference's own last change.
-``DEM_SWEEP_PARTS`` (comma list of ``batch``, ``scaling``, ``accuracy``; default all) picks
-the parts.
+The instruction floor by pass (:func:`floor_rows`): per step and trajectory of the streaming
+sweep, each pass's operations by class, its flops floor and its instruction floor with what
+bounds it, and the measured rates. ``DEM_SWEEP_PARTS`` (comma list of ``batch``, ``floor``,
+``scaling``, ``accuracy``; default all) picks the parts.
 """
 
 from __future__ import annotations
@@ -72,8 +78,10 @@ def rel_l2(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def run() -> dict[str, Any]:
-    parts = os.environ.get("DEM_SWEEP_PARTS", "batch,scaling,accuracy").split(",")
+    parts = os.environ.get("DEM_SWEEP_PARTS", "batch,floor,scaling,accuracy").split(",")
     out: dict[str, Any] = _batch() if "batch" in parts else {}
+    if "floor" in parts:
+        out.update(_floor_summary(*floor_rows()))
     if "scaling" in parts:
         out.update(_scaling_summary(scaling_rows()))
     if "accuracy" in parts:
@@ -107,11 +115,80 @@ def _scaling_summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
             "simulate_512_over_128": sim[512]["trajectories_per_s"]
             / sim[128]["trajectories_per_s"],
             "sweep_2048_vs_flops_floor": sw[2048]["vs_flops_floor"],
+            "sweep_2048_vs_instr_floor": sw[2048]["vs_instr_floor"],
             "sweep_2048_vs_lanes_floor": sw[2048]["vs_lanes_floor"],
             "scaling_table": rows,
         }
     )
     return out
+
+
+def _floor_summary(rows: list[dict[str, Any]], rates: dict[str, float]) -> dict[str, Any]:
+    _print_table("the sweep's floors by pass (per step and trajectory)", rows)
+    print(
+        "-- rates (lane operations/s, every thread): "
+        + ", ".join(f"{k} {v:.3g}" for k, v in rates.items() if k != "mixed_vs_sum")
+        + f"; a 50/50 mix of fma and other ops takes {rates['mixed_vs_sum']:.2f}x the summed time"
+    )
+    total = rows[-1]
+    out: dict[str, Any] = {f"rate_{k}": v for k, v in rates.items()}
+    out.update(
+        {
+            "floor_table": rows,
+            "instr_over_flops_floor": total["instr_floor_ns"] / total["flops_floor_ns"],
+        }
+    )
+    return out
+
+
+def floor_rows() -> tuple[list[dict[str, Any]], dict[str, float]]:
+    """The streaming sweep's floors by pass (far end recorded, benchmark chain, default
+    integrator at 250 kS/s): per step and trajectory each pass's operations by class
+    (``benchmarks._floor.kernel_ops``), flops, the time of those flops at the measured peak and
+    the instruction floor with its bound (the square-root unit or the ports); the last row sums
+    them. Also returns the measured rates (``benchmarks._floor.instruction_rates``) and the
+    peak (``peak_flops``, flop/s)."""
+    from benchmarks._floor import instruction_floor, instruction_rates, kernel_ops, peak_flops
+    from sim_backend.dem.simulation import DEFAULT_INTEGRATOR, INTEGRATORS
+
+    chain = dem.build_chain(benchmark_chain_spec())
+    drives = _drives(chain, np.array([chain.delta0_m]))
+    res = dem.simulate(chain, drives, duration_s=1e-4, sample_rate_Hz=RATE_HZ)  # warm-up
+    n_sub = int(res.meta["substeps_per_sample"])
+    n_kicks = len(INTEGRATORS[DEFAULT_INTEGRATOR][2])
+    dashpot = chain.contact_damping_ratio > 0
+    ops = kernel_ops(chain.n, chain.n_modes + 1, n_kicks, n_sub, dashpot, 1)
+    peak = peak_flops(repeats=3)
+    rates = instruction_rates(repeats=3)
+    rates["peak_flops"] = peak
+    floor = instruction_floor(ops, rates, lane_steps=1.0)
+    # the last drift's unneeded u and u' (kernel_ops counts them, the flops do not)
+    unneeded = {"pass1": 4.0 * chain.n * (chain.n_modes + 1) / n_sub}
+    rows: list[dict[str, Any]] = []
+    for name, c in ops.items():
+        flops = 2.0 * c["fma"] + c["other"] + c["sqrt"] - unneeded.get(name, 0.0)
+        rows.append(
+            {
+                "pass": name,
+                "fma": c["fma"],
+                "other": c["other"],
+                "sqrt": c["sqrt"],
+                "flops": flops,
+                "flops_floor_ns": flops / peak * 1e9,
+                "instr_floor_ns": floor[f"{name}_s"] * 1e9,
+                "bound": floor[f"{name}_bound"],
+            }
+        )
+    rows.append(
+        {
+            "pass": "all",
+            **{k: sum(r[k] for r in rows) for k in ("fma", "other", "sqrt", "flops")},
+            "flops_floor_ns": sum(r["flops_floor_ns"] for r in rows),
+            "instr_floor_ns": floor["total_s"] * 1e9,
+            "bound": "",
+        }
+    )
+    return rows, rates
 
 
 def _accuracy_summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
@@ -225,7 +302,13 @@ def scaling_point(batch: int, path: str) -> dict[str, Any]:
     """
     import tracemalloc
 
-    from benchmarks.dem_vs_scipy import flops_per_step, peak_flops
+    from benchmarks._floor import (
+        flops_per_step,
+        instruction_floor,
+        instruction_rates,
+        kernel_ops,
+        peak_flops,
+    )
     from sim_backend.dem.simulation import DEFAULT_INTEGRATOR, INTEGRATORS
     from sim_backend.dem.sweep import sweep
 
@@ -244,10 +327,12 @@ def scaling_point(batch: int, path: str) -> dict[str, Any]:
                              cylinders=far, record=("velocity",))  # fmt: skip
         chunk_s = min(chunk_s, time.perf_counter() - t0)
     peak = peak_flops(repeats=2)
+    rates = instruction_rates(repeats=2)
     n_sub = int(res16.meta["substeps_per_sample"])
     _, _, b_w = INTEGRATORS[DEFAULT_INTEGRATOR]
     recorded = 1 if path == "sweep" else chain.n
-    fps = flops_per_step(chain.n, chain.n_modes + 1, len(b_w), n_sub, chain.damped, recorded)
+    counts = (chain.n, chain.n_modes + 1, len(b_w), n_sub, chain.contact_damping_ratio > 0)
+    fps = flops_per_step(*counts, recorded)
     steps = n_sub * (res16.time_s.size - 1)
     # the same number of trajectories (TRAJECTORIES) at every batch size: B = 128 runs 16
     # times, 2048 once, so that every row is exposed to the shared host for as long
@@ -272,6 +357,8 @@ def scaling_point(batch: int, path: str) -> dict[str, Any]:
         walls.append(t_round / rounds)
     wall = min(walls)
     floor_flops_s = fps * steps * batch / peak
+    instr = instruction_floor(kernel_ops(*counts, recorded), rates, steps * batch)
+    floor_instr_s = instr["total_s"]
     floor_lanes_s = chunk_s * batch / len(sixteen)
     return {
         "path": path,
@@ -282,6 +369,8 @@ def scaling_point(batch: int, path: str) -> dict[str, Any]:
         "rounds": rounds,
         "floor_flops_s": floor_flops_s,
         "vs_flops_floor": wall / floor_flops_s,
+        "floor_instr_s": floor_instr_s,
+        "vs_instr_floor": wall / floor_instr_s,
         "floor_lanes_s": floor_lanes_s,
         "vs_lanes_floor": wall / floor_lanes_s,
         "peak_flops_per_s": peak,

@@ -12,12 +12,12 @@
    most the default integrator's. ``ratio_vs_solve_ivp``: DOP853's wall time at that tolerance
    over one trajectory's share of the batch (the geometric mean over the subset;
    ``ratio_single``: over the default integrator run alone on that one trajectory).
-3. The floor: floating-point operations per step of the kernel (counted from its loops, below)
-   times the steps of the sweep, over the peak rate of this machine measured by a small numba
-   kernel (independent multiply-adds, all threads). ``floor_ratio`` = sweep wall / floor. The
-   peak is measured right before each run of the sweep (the machine is shared, and its speed
-   drifts by tens of per cent within minutes): ``floor_ratio`` takes the best of each,
-   ``floor_ratio_median`` the medians.
+3. The floor: floating-point operations per step of the kernel (counted from its loops,
+   ``benchmarks/_floor.py``) times the steps of the sweep, over the peak rate of this machine
+   measured by a small numba kernel (independent multiply-adds, all threads). ``floor_ratio`` =
+   sweep wall / floor. The peak is measured right before each run of the sweep (the machine is
+   shared, and its speed drifts by tens of per cent within minutes): ``floor_ratio`` takes the
+   best of each, ``floor_ratio_median`` the medians.
 
 Set ``DEM_VS_SCIPY_SUBSET=4`` to add the middle amplitude of each direction.
 """
@@ -32,6 +32,7 @@ from typing import Any, Literal
 import numba
 import numpy as np
 
+from benchmarks._floor import flops_per_step, peak_flops
 from benchmarks.dem_sweep import DURATION_S, F_IN_HZ, N_AMPLITUDES, RATE_HZ, REPEATS, _drives
 from sim_backend import dem
 from sim_backend.dem.accuracy import measure_scipy
@@ -43,72 +44,6 @@ from sim_backend.dem.spec import benchmark_chain_spec
 
 #: turns of (peak, sweep) measured; the best of each is reported
 SWEEP_REPEATS = 5
-
-
-@numba.njit(parallel=True, fastmath=True, cache=True)
-def _fma_kernel(n_iter: int, n_par: int) -> np.ndarray:  # type: ignore[type-arg]
-    out = np.zeros(n_par)
-    for t in numba.prange(n_par):
-        x = np.empty(64)
-        for j in range(64):
-            x[j] = 1.0 + 1e-3 * j
-        for _ in range(n_iter):
-            for j in range(64):
-                x[j] = x[j] * 0.999999 + 1e-7
-        s = 0.0
-        for j in range(64):
-            s += x[j]
-        out[t] = s
-    return out
-
-
-def peak_flops(repeats: int = 5) -> float:
-    """Measured peak (flop/s) of independent multiply-adds on every numba thread (best of
-    ``repeats``)."""
-    n_par = numba.get_num_threads()
-    n_iter = 4_000_000
-    _fma_kernel(10, n_par)
-    best = math.inf
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        _fma_kernel(n_iter, n_par)
-        best = min(best, time.perf_counter() - t0)
-    return 2.0 * 64 * n_iter * n_par / best
-
-
-def flops_per_step(
-    n_cyl: int,
-    n_block: int,
-    n_kicks: int,
-    n_sub: int,
-    damped: bool,
-    n_recorded: int,
-    heun_kicks: bool = False,
-) -> float:
-    """Floating-point operations of one step of one trajectory in ``kernel.run_batch``, counted
-    from its loops (N cylinders, K = J + 1 block modes, m kicks a step, ``n_sub`` steps a
-    sample, C cylinders recorded; a fused multiply-add counts 2, a sqrt or max 1).
-
-    Pass 1 (after every drift, m per step plus one per sample): per cylinder the kick length x
-    force (N); per mode the pending kick ``p += f F`` (2), the 2x2 drift (6) and, except after
-    the sample's last drift, the mode's share of u and u' (4): 12 N K + N, or 8 N K + N.
-    Pass 2 (every kick), per contact: the overlap (2), Hertz ``beta d sqrt(d)`` with its max (4),
-    the force at the start velocities (5); damped, the stage velocity (3) and the force there
-    (5); then the force difference (1), or with Heun kicks the second stage velocity (3) and
-    pass 3: the force there (5), ``(k1 + 3 k3) / 4`` (3) and the force difference (1). The
-    actuator contact adds 11 (wall mask, drive force, the wall's work). Recording (every
-    sample): 2 K per recorded cylinder (the velocity).
-    """
-    nk = n_cyl * n_block
-    contacts = n_cyl + 1
-    pass1 = 12 * nk + n_cyl
-    pass1_last = 8 * nk + n_cyl
-    per_contact = 2 + 4 + 5 + 1
-    if damped:
-        per_contact += 3 + 5 + (3 + 5 + 3 if heun_kicks else 0)
-    contact_passes = per_contact * contacts + 11
-    record = 2 * n_block * n_recorded
-    return n_kicks * (pass1 + contact_passes) + (pass1_last + record) / n_sub
 
 
 def _rtol_for(scene: AccuracyScene, ref: Any, target: float) -> tuple[Any, list[dict[str, float]]]:
@@ -214,7 +149,8 @@ def run() -> dict[str, Any]:
             )
     order, _, b_w = INTEGRATORS[DEFAULT_INTEGRATOR]
     n_sub = int(sweep.meta["substeps_per_sample"])
-    fps = flops_per_step(chain.n, chain.n_modes + 1, len(b_w), n_sub, chain.damped, chain.n)
+    dashpot = chain.contact_damping_ratio > 0
+    fps = flops_per_step(chain.n, chain.n_modes + 1, len(b_w), n_sub, dashpot, chain.n)
     steps = n_sub * (sweep.time_s.size - 1)
     total_flops = fps * steps * len(drives)
     floor_s = total_flops / peak

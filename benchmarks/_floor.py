@@ -1,0 +1,278 @@
+"""Floors of the compiled DEM kernel (``sim_backend.dem.kernel.run_batch``): what its operations
+would cost at this machine's measured rates.
+
+:func:`kernel_ops` counts the kernel's vector operations per step and trajectory from its loops,
+by pass and by class: ``fma`` (fused multiply-add), ``other`` (add, subtract, multiply, max: the
+vector operations that are not multiply-adds) and ``sqrt``. Not counted: loads, stores,
+broadcasts, the scalar products of coefficients (a few per contact) and the drives (scalar, only
+while a drive is on). ``tests/dem/test_kernel_ops.py`` checks the counts against the kernel's own
+source run with counting stand-ins for its vectors. From them:
+
+- :func:`flops_per_step`: floating-point operations (a multiply-add counts 2, anything else 1);
+  over :func:`peak_flops` (independent multiply-adds on every thread) the *flops floor*;
+- :func:`instruction_floor`: per pass, the larger of the square-root unit's time (the square
+  roots at the measured rate of ``vsqrtpd``) and the arithmetic ports' time (multiply-adds at
+  the measured multiply-add rate plus the other operations at theirs: one set of ports for
+  both, as on Intel cores since Skylake; :func:`instruction_rates` measures a mix of the two
+  to check that on the host), summed over the passes: the *instruction floor*. It differs from
+  the flops floor in that an add, a multiply or a max costs as much as a multiply-add, and a
+  square root as much as the unit that computes it.
+
+Rates are measured by small numba kernels on the same four-lane vectors as the kernel
+(:mod:`sim_backend.dem.simd`), on every thread; a rate is in lane operations per second (one
+four-lane instruction = 4).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any
+
+import numba
+import numpy as np
+
+from sim_backend.dem.simd import vfma, vlane, vmax, vsplat, vsqrt
+
+#: operation classes of :func:`kernel_ops`
+OP_CLASSES = ("fma", "other", "sqrt")
+
+
+def kernel_ops(
+    n_cyl: int,
+    n_block: int,
+    n_kicks: int,
+    n_sub: int,
+    dashpot: bool,
+    n_recorded: int,
+    heun_kicks: bool = False,
+    far_wall: bool = True,
+) -> dict[str, dict[str, float]]:
+    """Vector operations of ``run_batch`` per step and trajectory (one four-lane instruction
+    counts once per lane group, i.e. per trajectory), by pass and class (:data:`OP_CLASSES`).
+
+    N cylinders, K = J + 1 block modes, m kicks a step, ``n_sub`` steps a sample, ``dashpot``: a
+    contact dashpot on (the kernel's damped kicks), C cylinders whose velocity is recorded.
+    Executed operations, the unneeded ones included (u and u' after a sample's last drift).
+
+    - ``pass1``, after every drift (m per step and one per sample): per cylinder the kick length
+      x force (1 other); per mode the pending kick (1 fma), the 2x2 drift (2 fma, 2 other) and
+      the mode's share of u and u' (2 fma).
+    - ``pass2``, every kick. The actuator (lane masks, drive force, the Hertz force with its
+      overlap, the wall's work, the force at the start velocities): 21 other, 1 sqrt. Between
+      cylinders: the overlap (2), the Hertz force (2 multiplies and a max, 1 sqrt), the force at
+      the start velocities (5); at a far wall: overlap 1, Hertz 3 and 1 sqrt, force 4 (a free
+      end: nothing). No dashpot: the force on each cylinder (1 each). Dashpot: per cylinder the
+      stage velocity (3), per contact the force at the stage velocities (actuator 7, between
+      cylinders 5, far wall 4), per cylinder the force on it (midpoint, 1) or its second stage
+      velocity (Heun, 3).
+    - ``pass3``, every kick with Heun kicks: the actuator 12 (drive force 2, force 7,
+      ``(k1 + 3 k3) / 4`` 3), per contact between cylinders the force (5), the average (3) and
+      the force on the cylinder (1); the far end 8 (a free end 4).
+    - ``record``, every sample: per recorded cylinder the velocity ``sum_k phi_k p_k`` (K fma).
+    """
+    N, K = n_cyl, n_block
+    w = 1 if far_wall else 0
+    drifts = n_kicks + 1.0 / n_sub
+    out = {"pass1": {"fma": 5 * N * K * drifts, "other": (2 * N * K + N) * drifts, "sqrt": 0.0}}
+    other = 21 + 10 * (N - 1) + 8 * w
+    if not dashpot:
+        other += N
+    else:
+        other += 3 * N + (7 + 5 * (N - 1) + 4 * w) + (3 if heun_kicks else 1) * N
+    out["pass2"] = {"fma": 0.0, "other": float(other * n_kicks), "sqrt": float((N + w) * n_kicks)}
+    if dashpot and heun_kicks:
+        pass3 = 12 + 9 * (N - 1) + 4 * w + 4
+        out["pass3"] = {"fma": 0.0, "other": float(pass3 * n_kicks), "sqrt": 0.0}
+    out["record"] = {"fma": K * n_recorded / n_sub, "other": 0.0, "sqrt": 0.0}
+    return out
+
+
+def flops_per_step(
+    n_cyl: int,
+    n_block: int,
+    n_kicks: int,
+    n_sub: int,
+    dashpot: bool,
+    n_recorded: int,
+    heun_kicks: bool = False,
+    far_wall: bool = True,
+) -> float:
+    """Floating-point operations of one step of one trajectory that the result needs: the
+    operations of :func:`kernel_ops` (a multiply-add counts 2, a sqrt, max, add, subtract or
+    multiply 1) less u and u' after a sample's last drift (4 N K per sample), which the kernel
+    computes and does not use."""
+    ops = kernel_ops(n_cyl, n_block, n_kicks, n_sub, dashpot, n_recorded, heun_kicks, far_wall)
+    total = sum(2.0 * c["fma"] + c["other"] + c["sqrt"] for c in ops.values())
+    return total - 4.0 * n_cyl * n_block / n_sub
+
+
+# --- measured rates -----------------------------------------------------------------------
+
+
+@numba.njit(parallel=True, fastmath=True, cache=True)
+def _fma_kernel(n_iter: int, n_par: int) -> np.ndarray:  # type: ignore[type-arg]
+    out = np.zeros(n_par)
+    for t in numba.prange(n_par):
+        x = np.empty(64)
+        for j in range(64):
+            x[j] = 1.0 + 1e-3 * j
+        for _ in range(n_iter):
+            for j in range(64):
+                x[j] = x[j] * 0.999999 + 1e-7
+        s = 0.0
+        for j in range(64):
+            s += x[j]
+        out[t] = s
+    return out
+
+
+def peak_flops(repeats: int = 5, n_iter: int = 4_000_000) -> float:
+    """Measured peak (flop/s) of independent multiply-adds on every numba thread (best of
+    ``repeats``; LLVM vectorises this loop at the width it picks for the kernel's too)."""
+    n_par = numba.get_num_threads()
+    _fma_kernel(10, n_par)
+    best = math.inf
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        _fma_kernel(n_iter, n_par)
+        best = min(best, time.perf_counter() - t0)
+    return 2.0 * 64 * n_iter * n_par / best
+
+
+@numba.njit(parallel=True, cache=True)
+def _sqrt_kernel(n_iter: int, n_par: int) -> np.ndarray:  # type: ignore[type-arg]
+    """8 independent square-root chains ``a = sqrt(a) + c`` per thread (one add per root)."""
+    out = np.zeros(n_par)
+    for t in numba.prange(n_par):
+        c = vsplat(1.7)
+        a0, a1, a2, a3 = vsplat(2.1 + t), vsplat(2.2), vsplat(2.3), vsplat(2.4)
+        a4, a5, a6, a7 = vsplat(2.5), vsplat(2.6), vsplat(2.7), vsplat(2.8)
+        for _ in range(n_iter):
+            a0, a1, a2, a3 = vsqrt(a0) + c, vsqrt(a1) + c, vsqrt(a2) + c, vsqrt(a3) + c
+            a4, a5, a6, a7 = vsqrt(a4) + c, vsqrt(a5) + c, vsqrt(a6) + c, vsqrt(a7) + c
+        out[t] = vlane(a0 + a1 + a2 + a3 + a4 + a5 + a6 + a7, 0)
+    return out
+
+
+@numba.njit(parallel=True, cache=True)
+def _other_kernel(n_iter: int, n_par: int) -> np.ndarray:  # type: ignore[type-arg]
+    """12 operations per iteration and thread: 4 independent adds, maxes and multiplies."""
+    out = np.zeros(n_par)
+    for t in numba.prange(n_par):
+        d = vsplat(1e-9)
+        c = vsplat(1.0 - 1e-10)
+        a0, a1, a2, a3 = vsplat(1.0 + t), vsplat(2.0), vsplat(3.0), vsplat(4.0)
+        m0, m1, m2, m3 = vsplat(0.0), vsplat(0.0), vsplat(0.0), vsplat(0.0)
+        p0, p1, p2, p3 = vsplat(1.0), vsplat(2.0), vsplat(3.0), vsplat(4.0)
+        for _ in range(n_iter):
+            a0, a1, a2, a3 = a0 + d, a1 + d, a2 + d, a3 + d
+            m0, m1, m2, m3 = vmax(m0, a0), vmax(m1, a1), vmax(m2, a2), vmax(m3, a3)
+            p0, p1, p2, p3 = p0 * c, p1 * c, p2 * c, p3 * c
+        s = a0 + a1 + a2 + a3 + m0 + m1 + m2 + m3 + p0 + p1 + p2 + p3
+        out[t] = vlane(s, 0)
+    return out
+
+
+@numba.njit(parallel=True, cache=True)
+def _vfma_kernel(n_iter: int, n_par: int) -> np.ndarray:  # type: ignore[type-arg]
+    """10 independent multiply-add chains per thread."""
+    out = np.zeros(n_par)
+    for t in numba.prange(n_par):
+        c = vsplat(0.999999)
+        d = vsplat(1e-7)
+        x0, x1, x2, x3, x4 = vsplat(1.0 + t), vsplat(1.1), vsplat(1.2), vsplat(1.3), vsplat(1.4)
+        x5, x6, x7, x8, x9 = vsplat(1.5), vsplat(1.6), vsplat(1.7), vsplat(1.8), vsplat(1.9)
+        for _ in range(n_iter):
+            x0 = vfma(x0, c, d)
+            x1 = vfma(x1, c, d)
+            x2 = vfma(x2, c, d)
+            x3 = vfma(x3, c, d)
+            x4 = vfma(x4, c, d)
+            x5 = vfma(x5, c, d)
+            x6 = vfma(x6, c, d)
+            x7 = vfma(x7, c, d)
+            x8 = vfma(x8, c, d)
+            x9 = vfma(x9, c, d)
+        out[t] = vlane(x0 + x1 + x2 + x3 + x4 + x5 + x6 + x7 + x8 + x9, 0)
+    return out
+
+
+@numba.njit(parallel=True, cache=True)
+def _mixed_kernel(n_iter: int, n_par: int) -> np.ndarray:  # type: ignore[type-arg]
+    """6 multiply-adds and 6 other operations (2 adds, maxes, multiplies) per iteration."""
+    out = np.zeros(n_par)
+    for t in numba.prange(n_par):
+        c = vsplat(0.999999)
+        d = vsplat(1e-7)
+        e = vsplat(1e-9)
+        g = vsplat(1.0 - 1e-10)
+        x0, x1, x2 = vsplat(1.0 + t), vsplat(1.1), vsplat(1.2)
+        x3, x4, x5 = vsplat(1.3), vsplat(1.4), vsplat(1.5)
+        a0, a1 = vsplat(1.0), vsplat(2.0)
+        m0, m1 = vsplat(0.0), vsplat(0.0)
+        p0, p1 = vsplat(1.0), vsplat(2.0)
+        for _ in range(n_iter):
+            x0, x1, x2 = vfma(x0, c, d), vfma(x1, c, d), vfma(x2, c, d)
+            x3, x4, x5 = vfma(x3, c, d), vfma(x4, c, d), vfma(x5, c, d)
+            a0, a1 = a0 + e, a1 + e
+            m0, m1 = vmax(m0, a0), vmax(m1, a1)
+            p0, p1 = p0 * g, p1 * g
+        s = x0 + x1 + x2 + x3 + x4 + x5 + a0 + a1 + m0 + m1 + p0 + p1
+        out[t] = vlane(s, 0)
+    return out
+
+
+def _best_s(kernel: Any, n_iter: int, n_par: int, repeats: int) -> float:
+    kernel(2, n_par)  # compiled (or loaded from the cache) before the timing
+    best = math.inf
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        kernel(n_iter, n_par)
+        best = min(best, time.perf_counter() - t0)
+    return best
+
+
+def instruction_rates(repeats: int = 3, scale: float = 1.0) -> dict[str, float]:
+    """Measured rates (lane operations/s, every numba thread, best of ``repeats``) of
+    ``sqrt`` (``vsqrtpd``), ``other`` (add, max, multiply) and ``fma``; ``mixed_vs_sum``: the
+    time of a 50/50 mix of multiply-adds and other operations over the time the two rates
+    predict for it if they share one set of ports (about 1 when they do, about 0.5 when they
+    are on separate ports). ``scale`` shortens the kernels (tests); each takes about 50 ms at 1."""
+    n_par = numba.get_num_threads()
+    lanes = 4.0 * n_par
+    n_sqrt = max(1, int(2_000_000 * scale))
+    n_other = max(1, int(30_000_000 * scale))
+    n_fma = max(1, int(40_000_000 * scale))
+    t_sqrt = _best_s(_sqrt_kernel, n_sqrt, n_par, repeats)
+    t_other = _best_s(_other_kernel, n_other, n_par, repeats)
+    t_fma = _best_s(_vfma_kernel, n_fma, n_par, repeats)
+    t_mixed = _best_s(_mixed_kernel, n_fma, n_par, repeats)
+    rates = {
+        "sqrt": 8.0 * n_sqrt * lanes / t_sqrt,
+        "other": 12.0 * n_other * lanes / t_other,
+        "fma": 10.0 * n_fma * lanes / t_fma,
+    }
+    predicted = 6.0 * n_fma * lanes * (1.0 / rates["fma"] + 1.0 / rates["other"])
+    rates["mixed_vs_sum"] = t_mixed / predicted
+    return rates
+
+
+def instruction_floor(
+    ops: dict[str, dict[str, float]], rates: dict[str, float], lane_steps: float
+) -> dict[str, Any]:
+    """The instruction floor (s) of ``lane_steps`` trajectory-steps of a kernel whose counts per
+    step and trajectory are ``ops`` (:func:`kernel_ops`), at ``rates`` (:func:`instruction_rates`):
+    per pass ``max(sqrt / rate_sqrt, fma / rate_fma + other / rate_other)``, summed. Returns
+    ``total_s``, and per pass ``<pass>_s`` and ``<pass>_bound`` (``"sqrt"`` or ``"ports"``)."""
+    out: dict[str, Any] = {}
+    total = 0.0
+    for name, c in ops.items():
+        t_sqrt = c["sqrt"] / rates["sqrt"]
+        t_ports = c["fma"] / rates["fma"] + c["other"] / rates["other"]
+        t = max(t_sqrt, t_ports) * lane_steps
+        out[f"{name}_s"] = t
+        out[f"{name}_bound"] = "sqrt" if t_sqrt > t_ports else "ports"
+        total += t
+    out["total_s"] = total
+    return out

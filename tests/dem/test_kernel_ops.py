@@ -1,0 +1,216 @@
+"""The kernel's operation counts (``benchmarks/_floor.py``: the flops and instruction floors of
+``benchmarks/dem_sweep.py``) against the kernel itself: ``run_batch``'s Python source run on a
+small chain with counting stand-ins for its four-lane vectors, so that every vector operation
+the compiled kernel executes is counted once per lane group; and the floors' measuring kernels
+on a short run."""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from collections.abc import Callable
+from typing import Any
+
+import numba
+import numpy as np
+import pytest
+
+from benchmarks._floor import (
+    flops_per_step,
+    instruction_floor,
+    instruction_rates,
+    kernel_ops,
+    peak_flops,
+)
+from instruments.burst import Burst
+from sim_backend import dem
+from sim_backend.dem import kernel, simulation
+from sim_backend.dem.simulation import INTEGRATORS
+from sim_backend.dem.spec import BENCHMARK_DAMPING, default_chain_spec
+
+_COUNT: Counter[str] = Counter()
+
+
+class _Lanes:
+    """Four lanes of the pure-Python kernel; every arithmetic operation counts one ``other``."""
+
+    __array_ufunc__ = None  # numpy scalars on the left defer to the reflected operators
+
+    def __init__(self, x: np.ndarray) -> None:  # type: ignore[type-arg]
+        self.x = x
+
+    def _op(self, other: Any, f: Callable[[Any, Any], Any], reflected: bool = False) -> _Lanes:
+        _COUNT["other"] += 1
+        y = other.x if isinstance(other, _Lanes) else other
+        return _Lanes(f(y, self.x) if reflected else f(self.x, y))
+
+    def __add__(self, o: Any) -> _Lanes:
+        return self._op(o, np.add)
+
+    def __radd__(self, o: Any) -> _Lanes:
+        return self._op(o, np.add, True)
+
+    def __sub__(self, o: Any) -> _Lanes:
+        return self._op(o, np.subtract)
+
+    def __rsub__(self, o: Any) -> _Lanes:
+        return self._op(o, np.subtract, True)
+
+    def __mul__(self, o: Any) -> _Lanes:
+        return self._op(o, np.multiply)
+
+    def __rmul__(self, o: Any) -> _Lanes:
+        return self._op(o, np.multiply, True)
+
+
+def _vload(a: np.ndarray, i: int) -> _Lanes:  # type: ignore[type-arg]
+    return _Lanes(a[i : i + 4].copy())
+
+
+def _vstore(a: np.ndarray, i: int, v: _Lanes) -> None:  # type: ignore[type-arg]
+    a[i : i + 4] = v.x
+
+
+def _vsplat(x: float) -> _Lanes:
+    return _Lanes(np.full(4, float(x)))
+
+
+def _vfma(a: _Lanes, b: _Lanes, c: _Lanes) -> _Lanes:
+    _COUNT["fma"] += 1
+    return _Lanes(a.x * b.x + c.x)
+
+
+def _vmax(a: _Lanes, b: _Lanes) -> _Lanes:
+    _COUNT["other"] += 1
+    return _Lanes(np.maximum(a.x, b.x))
+
+
+def _vsqrt(a: _Lanes) -> _Lanes:
+    _COUNT["sqrt"] += 1
+    return _Lanes(np.sqrt(a.x))
+
+
+def _counted_run(
+    monkeypatch: pytest.MonkeyPatch, chain: dem.Chain, n_drives: int, **kw: Any
+) -> tuple[Counter[str], dict[str, Any]]:
+    """Vector operations of one ``simulate`` call run by the kernel's Python source, and the
+    kernel's arguments (lane groups, substeps, samples)."""
+    captured: dict[str, Any] = {}
+
+    def capture(*args: Any) -> None:
+        captured["args"] = args
+
+    monkeypatch.setattr(simulation, "run_batch", capture)
+    drives = [
+        dem.Drive("ltr", "displacement", a * chain.delta0_m, burst=Burst(8.92e3, 5.0))
+        for a in np.linspace(0.5, 3.0, n_drives)
+    ]
+    dem.simulate(chain, drives, duration_s=8e-6, sample_rate_Hz=250e3, **kw)
+    for name in ("vload", "vstore", "vsplat", "vfma", "vmax", "vsqrt"):
+        monkeypatch.setattr(kernel, name, globals()[f"_{name}"])
+    for name, obj in list(vars(kernel).items()):
+        if isinstance(obj, numba.core.registry.CPUDispatcher):
+            monkeypatch.setattr(kernel, name, obj.py_func)
+    _COUNT.clear()
+    args = captured["args"]
+    kernel.run_batch(*args)
+    assert np.all(np.isfinite(args[24]))  # the Python kernel ran on real numbers
+    lane_traj, n_sub, n_samples, far_wall = args[5], args[17], args[18], args[22]
+    info = {
+        "groups": lane_traj.size // 4,
+        "n_sub": n_sub,
+        "n_samples": n_samples,
+        "far_wall": far_wall == 1,
+    }
+    return Counter(_COUNT), info
+
+
+def _small_chain(**update: Any) -> dem.Chain:
+    spec = default_chain_spec().model_copy(update={"n_cylinders": 5, "n_modes": 2, **update})
+    return dem.build_chain(spec)
+
+
+@pytest.mark.parametrize(
+    ("label", "update", "kick", "n_drives", "cylinders"),
+    [
+        ("damped, midpoint", {"damping": BENCHMARK_DAMPING}, "midpoint", 4, None),
+        ("damped, Heun", {"damping": BENCHMARK_DAMPING}, "heun3", 4, [5]),
+        ("undamped contacts", {}, "midpoint", 16, [1, 3]),
+        (
+            "free far end, damped",
+            {"damping": BENCHMARK_DAMPING, "far_end": "free"},
+            "midpoint",
+            4,
+            None,
+        ),
+        (
+            "free far end, Heun",
+            {"damping": BENCHMARK_DAMPING, "far_end": "free"},
+            "heun3",
+            4,
+            None,
+        ),
+    ],
+)
+def test_kernel_ops_count_what_the_kernel_executes(
+    monkeypatch: pytest.MonkeyPatch,
+    label: str,
+    update: dict[str, Any],
+    kick: str,
+    n_drives: int,
+    cylinders: list[int] | None,
+) -> None:
+    """Each class's total over a short run (2 samples of 2 steps of 6 kicks, then the last
+    sample recorded) is exactly what ``kernel_ops`` says, for 5 cylinders and 3 block modes."""
+    chain = _small_chain(**update)
+    counted, info = _counted_run(
+        monkeypatch, chain, n_drives, cylinders=cylinders, record=("velocity",), dashpot_kick=kick
+    )
+    n_kicks = len(INTEGRATORS["blanes-moan4"][2])
+    n_rec = chain.n if cylinders is None else len(cylinders)
+    ops = kernel_ops(
+        chain.n, chain.n_modes + 1, n_kicks, info["n_sub"], chain.contact_damping_ratio > 0, n_rec,
+        heun_kicks=kick == "heun3", far_wall=info["far_wall"],
+    )  # fmt: skip
+    steps = (info["n_samples"] - 1) * info["n_sub"]
+    for cls in ("fma", "other", "sqrt"):
+        per_step = sum(p[cls] for p in ops.values())
+        # the last sample is recorded without a step after it
+        expected = (per_step * steps + ops["record"][cls] * info["n_sub"]) * info["groups"]
+        assert counted[cls] == pytest.approx(expected, abs=1e-6), (label, cls)
+    assert (chain.contact_damping_ratio > 0) == ("undamped" not in label)
+
+
+def test_flops_per_step_by_hand() -> None:
+    """Two cylinders, one mode (the rigid one), one kick a step, one step a sample, undamped,
+    nothing recorded, far wall: pass 1 per drift 2 x (1 + 5 x 2 + 2) = 26 flops, two drifts
+    (the last one's u and u', 2 x 4 flops, not needed); pass 2: actuator 21 + 1, one contact
+    between the cylinders 10 + 1, the far wall 8 + 1, two forces on the cylinders: 44."""
+    assert flops_per_step(2, 1, 1, 1, False, 0) == 26 + (26 - 8) + 44
+    ops = kernel_ops(2, 1, 1, 1, False, 0)
+    assert ops["pass2"] == {"fma": 0.0, "other": 41.0, "sqrt": 3.0}
+    # the benchmark's sweep (31 cylinders, K = 4, 6 kicks, 2 steps a sample, damped, every
+    # cylinder recorded): pass 1 and the recording as counted before, 13 625.5 in all
+    assert flops_per_step(31, 4, 6, 2, True, 31) == 13625.5
+
+
+def test_instruction_floor_takes_the_slower_unit_per_pass() -> None:
+    ops = {
+        "a": {"fma": 8.0, "other": 4.0, "sqrt": 1.0},  # ports 8/8 + 4/4 = 2 s, sqrt 1/2 s
+        "b": {"fma": 0.0, "other": 4.0, "sqrt": 6.0},  # ports 1 s, sqrt 3 s
+    }
+    rates = {"fma": 8.0, "other": 4.0, "sqrt": 2.0}
+    floor = instruction_floor(ops, rates, lane_steps=10.0)
+    assert floor["a_s"] == pytest.approx(20.0) and floor["a_bound"] == "ports"
+    assert floor["b_s"] == pytest.approx(30.0) and floor["b_bound"] == "sqrt"
+    assert floor["total_s"] == pytest.approx(50.0)
+
+
+def test_floor_kernels_run() -> None:
+    """The measuring kernels, briefly: positive finite rates, a square root slower than a
+    multiply-add, and a multiply-add peak in flops consistent with the vector FMA rate."""
+    rates = instruction_rates(repeats=1, scale=0.01)
+    for key in ("sqrt", "other", "fma", "mixed_vs_sum"):
+        assert math.isfinite(rates[key]) and rates[key] > 0, key
+    assert rates["sqrt"] < rates["fma"]
+    assert peak_flops(repeats=1, n_iter=10_000) > 0
