@@ -8,10 +8,15 @@
 - the step-stability check of the simulated bench's DEM runs: the smoke protocol's two keys
   (LTR 0.5 um and 3 um at 200 kS/s, 30 ms, the default integrator with its step-doubling
   estimate, whose rerun at 2h is the checked step) and the regime's largest drive (4 delta0),
-  in turn, with an empty user cache: per key the check's time (``check_step`` called first, as
-  ``simulate`` does), the run's time (``simulate`` with the estimate, the check then served
-  from memory) and the check as a fraction of that run; then the same check in a new process
-  (memory empty, the verdict on disk). Target: < 5 % of the run.
+  in turn, each in a fresh process with no stability verdict in the user cache (the compiled
+  kernel and step map on disk; the kernel loaded before timing): per key the check's time
+  (``check_step`` called first, as ``simulate`` does), the run's time (``simulate`` with the
+  estimate, the check then served from memory) and the check as a fraction of that run. For
+  (a) the shipped default chain, whose verdict comes with the package
+  (:mod:`sim_backend.dem.shipped_stability`); (b) a chain that does not ship (the default with
+  ``preload=6 N``), computed: its first key, then its later keys; (c) that chain in a new process,
+  the verdict on disk; (d) its first key with no compiled step map on disk (numba compiles it).
+  Target: < 5 % of the run.
 - ``run_protocol smoke`` as a subprocess on the simulated bench: cold (an empty cache folder,
   ``$BIAFC_CACHE_DIR``: the kernel compiles) and warm (the same folder again), the time from the
   start of the process to its first measured point (the first ``point 1/`` line) and to its
@@ -115,69 +120,84 @@ _CHECK_CODE = textwrap.dedent(
     from instruments.burst import Burst
     from sim_backend import dem
     from sim_backend.dem import step_limit
-    chain = dem.build_chain(dem.default_chain_spec())
+    from sim_backend.dem.shipped_stability import checked_step
+    chain = dem.build_chain(dem.load_chain_with_settings(None, {settings!r}))
+    rate = {rate!r}
+    # the kernel loaded (not timed: it is no part of the check)
+    dem.simulate(chain, [dem.Drive("ltr", "displacement", 1e-7, burst=Burst(8.92e3))],
+                 duration_s=1e-4, sample_rate_Hz=rate)
+    h = checked_step(chain, rate)
     out = []
-    for a, h in {keys!r}:
+    for a in [*{amplitudes!r}, 4.0 * chain.delta0_m]:
         d = dem.Drive("ltr", "displacement", a, burst=Burst(8.92e3))
         t0 = time.perf_counter()
         step_limit.check_step(chain, "blanes-moan4", h, [d])
-        out.append(time.perf_counter() - t0)
+        check_s = time.perf_counter() - t0
+        run_s = float("nan")
+        if {runs!r}:
+            t0 = time.perf_counter()
+            dem.simulate(chain, [d], duration_s={duration!r}, sample_rate_Hz=rate,
+                         error_estimate=True)
+            run_s = time.perf_counter() - t0
+        out.append({{"amplitude_m": a, "check_s": check_s, "run_s": run_s}})
     print(json.dumps(out))
     """
 )
+NOT_SHIPPED = ["preload=6 N"]  # the default chain with one setting changed: not in the table
+
+
+def _check_process(cache: Path, settings: list[str], runs: bool) -> list[dict[str, Any]]:
+    """One fresh process checking the keys (and timing their runs) with ``cache`` as the user
+    cache folder."""
+    env = dict(os.environ, BIAFC_CACHE_DIR=str(cache))
+    for var in ("NUMBA_CACHE_DIR", "NUMBA_CACHE_LOCATOR_CLASSES"):
+        env.pop(var, None)
+    code = _CHECK_CODE.format(settings=settings, rate=SMOKE_RATE_HZ, amplitudes=list(SMOKE_KEYS_M),
+                              runs=runs, duration=DEM_DURATION_S)  # fmt: skip
+    out = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True,
+        timeout=600,
+    )  # fmt: skip
+    rows: list[dict[str, Any]] = json.loads(out.stdout.strip().splitlines()[-1])
+    return rows
+
+
+def _forget_verdicts(cache: Path) -> None:
+    (cache / "step-stability.json").unlink(missing_ok=True)
 
 
 def _stability_rows(cache: Path) -> list[dict[str, Any]]:
-    from instruments.burst import Burst
-    from sim_backend import dem
-    from sim_backend.dem import step_limit
-
-    chain = dem.build_chain(dem.default_chain_spec())
-    amplitudes = [*SMOKE_KEYS_M, 4.0 * chain.delta0_m]
-    # warm the kernel (compiled or loaded) before timing runs
-    dem.simulate(chain, [dem.Drive("ltr", "displacement", 1e-7, burst=Burst(8.92e3))],
-                 duration_s=1e-4, sample_rate_Hz=SMOKE_RATE_HZ)  # fmt: skip
-    for name in ("_RANGE_CACHE", "_STABLE_CACHE", "_LIMIT_CACHE"):
-        getattr(step_limit, name).clear()
+    # compile the kernel and the step map into the empty folder (not timed)
+    _check_process(cache, NOT_SHIPPED, runs=False)
     rows = []
-    keys = []
-    for a in amplitudes:
-        drive = dem.Drive("ltr", "displacement", float(a), burst=Burst(8.92e3))
-        probe = dem.simulate(chain, [drive], duration_s=1e-4, sample_rate_Hz=SMOKE_RATE_HZ,
-                             record=())  # fmt: skip
-        h2 = 2.0 * float(probe.meta["dt_s"])  # the step of the error estimate's rerun
-        keys.append((float(a), h2))
-        t0 = time.perf_counter()
-        step_limit.check_step(chain, "blanes-moan4", h2, [drive])
-        check_s = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        dem.simulate(chain, [drive], duration_s=DEM_DURATION_S, sample_rate_Hz=SMOKE_RATE_HZ,
-                     error_estimate=True)  # fmt: skip
-        run_s = time.perf_counter() - t0
-        rows.append(
-            {
-                "what": f"stability check, key ltr {a * 1e6:.3g} um (first process)",
-                "check_s": check_s,
-                "run_s": run_s,
-                "check_of_run": check_s / run_s,
-                "load_1min": _load(),
-            }
-        )
-    env = dict(os.environ, BIAFC_CACHE_DIR=str(cache))
-    out = subprocess.run(
-        [sys.executable, "-c", _CHECK_CODE.format(keys=keys)],
-        env=env, capture_output=True, text=True, check=True, timeout=600,
-    )  # fmt: skip
-    for (a, _), check_s, row in zip(keys, json.loads(out.stdout.strip()), list(rows), strict=True):
-        rows.append(
-            {
-                "what": f"stability check, key ltr {a * 1e6:.3g} um (new process, verdict on disk)",
-                "check_s": check_s,
-                "run_s": row["run_s"],
-                "check_of_run": check_s / row["run_s"],
-                "load_1min": _load(),
-            }
-        )
+
+    def add(label: str, keys: list[dict[str, Any]], runs: list[dict[str, Any]]) -> None:
+        for i, (key, run) in enumerate(zip(keys, runs, strict=True)):
+            which = "first key" if i == 0 else "later key"
+            rows.append(
+                {
+                    "what": f"stability check, {label}, {which} ltr "
+                    f"{key['amplitude_m'] * 1e6:.3g} um",
+                    "check_s": key["check_s"],
+                    "run_s": run["run_s"],
+                    "check_of_run": key["check_s"] / run["run_s"],
+                    "load_1min": _load(),
+                }
+            )
+
+    _forget_verdicts(cache)
+    shipped = _check_process(cache, [], runs=True)
+    add("shipped chain, no verdict in the user cache", shipped, shipped)
+    _forget_verdicts(cache)
+    computed = _check_process(cache, NOT_SHIPPED, runs=True)
+    add("chain not shipped, no verdict in the user cache", computed, computed)
+    on_disk = _check_process(cache, NOT_SHIPPED, runs=False)
+    add("chain not shipped, new process, verdict on disk", on_disk, computed)
+    _forget_verdicts(cache)
+    for f in (cache / "numba").rglob("step_map.*"):
+        f.unlink()
+    cold = _check_process(cache, NOT_SHIPPED, runs=False)
+    add("chain not shipped, no verdict, step map not compiled", cold[:1], computed[:1])
     return rows
 
 
@@ -213,34 +233,34 @@ def _smoke(cache: Path, out: Path, label: str) -> dict[str, Any]:
 def run() -> dict[str, Any]:
     table: list[dict[str, Any]] = []
     table += _build_chain_rows()
-    import sim_backend.dem.kernel  # noqa: F401  (its compiled cache stays the user's)
-
     with tempfile.TemporaryDirectory(prefix="biafc-setup-") as tmp:
-        cache = Path(tmp) / "cache"
-        old = os.environ.get("BIAFC_CACHE_DIR")
-        os.environ["BIAFC_CACHE_DIR"] = str(cache)  # the stability verdicts go to an empty folder
-        try:
-            table += _stability_rows(cache)
-        finally:
-            if old is None:
-                os.environ.pop("BIAFC_CACHE_DIR", None)
-            else:
-                os.environ["BIAFC_CACHE_DIR"] = old
+        table += _stability_rows(Path(tmp) / "cache")
         smoke_cache = Path(tmp) / "smoke-cache"
         cold = _smoke(smoke_cache, Path(tmp) / "cold.h5", "cold (empty cache folder)")
         warm = _smoke(smoke_cache, Path(tmp) / "warm.h5", "warm (the same folder again)")
         table += [cold, warm]
     builds = [r for r in table if r["what"].startswith("build_chain")]
-    checks = [r for r in table if "first process" in r["what"]]
+
+    def rows(label: str, which: str = "") -> list[dict[str, Any]]:
+        return [r for r in table if label in r["what"] and which in r["what"]]
+
+    shipped = rows("shipped chain,", "first key")[0]
+    computed = rows("not shipped, no verdict in", "first key")[0]
+    later = rows("not shipped, no verdict in", "later key")
+    on_disk = rows("verdict on disk")
+    cold_compile = rows("step map not compiled")[0]
     out: dict[str, Any] = {
         "build_chain_1_thread_s": builds[0]["median_s"],
         "build_chain_default_threads_s": builds[1]["median_s"],
         "build_chain_max_s": max(r["max_s"] for r in builds),
         "import_dem_s": max(r["import_dem_s"] for r in builds),
-        "stability_check_first_key_s": checks[0]["check_s"],
-        "stability_check_max_of_run": max(r["check_of_run"] for r in checks),
-        "stability_checks_of_runs": sum(r["check_s"] for r in checks)
-        / sum(r["run_s"] for r in checks),
+        "stability_first_key_shipped_s": shipped["check_s"],
+        "stability_first_key_shipped_of_run": shipped["check_of_run"],
+        "stability_first_key_not_shipped_s": computed["check_s"],
+        "stability_first_key_not_shipped_of_run": computed["check_of_run"],
+        "stability_later_keys_max_of_run": max(r["check_of_run"] for r in later),
+        "stability_on_disk_max_of_run": max(r["check_of_run"] for r in on_disk),
+        "stability_step_map_compile_s": cold_compile["check_s"],
         "smoke_cold_first_point_s": cold["first_point_s"],
         "smoke_cold_s": cold["total_s"],
         "smoke_warm_first_point_s": warm["first_point_s"],

@@ -68,7 +68,9 @@ __all__ = [
     "contact_stiffness_N_per_m",
     "is_stable",
     "largest_stable_step",
+    "range_key",
     "reference_overlap_m",
+    "scan_range",
     "spectral_radius",
     "stable_up_to",
 ]
@@ -479,7 +481,9 @@ class _RangeVerdict:
 _RANGE_CACHE: dict[str, _RangeVerdict] = {}
 
 
-def _range_key(chain: Chain, integrator: str, h: float) -> str:
+def range_key(chain: Chain, integrator: str, h: float) -> str:
+    """The key of a (chain, integrator, step) verdict: a digest of the chain's content, the
+    integrator, ``repr(h)`` and ``MODES_VERSION`` (the user's cache and the shipped table)."""
     from sim_backend.dem.beam import MODES_VERSION
 
     text = f"{chain.spec.model_dump_json()}|{integrator}|{h!r}|modes={MODES_VERSION}"
@@ -522,6 +526,51 @@ def _disk_store(key: str, v: _RangeVerdict) -> None:
         pass
 
 
+def _start_m(chain: Chain, overlap_m: float) -> float:
+    return chain.delta0_m if chain.delta0_m > 0 else overlap_m / RANGE_RATIO**8
+
+
+def _extend(v: _RangeVerdict, chain: Chain, integrator: str, h: float, overlap_m: float) -> bool:
+    """Scan the grid points above what ``v`` knows up to the first at or above ``overlap_m``
+    (all at once, one compiled call), then in order up to the first unstable one; whether any
+    was computed."""
+    d = v.start_m if v.stable_to_m <= 0.0 else v.stable_to_m * RANGE_RATIO
+    grid: list[float] = []
+    while d < v.unstable_at_m and (not grid or grid[-1] < overlap_m):
+        grid.append(d)
+        d *= RANGE_RATIO
+    if not grid:
+        return False
+    v.evaluations += len(grid)
+    for d, ok in zip(grid, _stable_many(chain, integrator, h, grid), strict=True):
+        if not ok:
+            v.unstable_at_m = d
+            break
+        v.stable_to_m = d
+    return True
+
+
+def scan_range(chain: Chain, integrator: str, h: float, overlap_m: float) -> _RangeVerdict:
+    """A fresh verdict of step ``h`` (s), scanned from ``delta0`` up to the grid point at or
+    above ``overlap_m`` (m) or the first unstable one; no cache read or written (for the shipped
+    table, :mod:`sim_backend.dem.shipped_stability`)."""
+    v = _RangeVerdict(_start_m(chain, overlap_m))
+    _extend(v, chain, integrator, h, overlap_m)
+    return v
+
+
+def _known(key: str) -> _RangeVerdict | None:
+    """What the user's cache folder, else the shipped table, knows of ``key``."""
+    v = _disk_load(key)
+    if v is None:
+        from sim_backend.dem.shipped_stability import lookup
+
+        hit = lookup(key)
+        if hit is not None:
+            v = _RangeVerdict(*hit)
+    return v
+
+
 def stable_up_to(chain: Chain, integrator: str, h: float, overlap_m: float) -> bool:
     """Whether step ``h`` (s) is linearly stable for every contact overlap from ``delta0`` up to
     ``overlap_m`` (m), checked on the grid ``delta0 RANGE_RATIO^n`` and at the grid point at or
@@ -530,16 +579,16 @@ def stable_up_to(chain: Chain, integrator: str, h: float, overlap_m: float) -> b
     Computed once per (chain, integrator, step): the verdict grows lazily with the largest
     overlap asked for and is kept in memory and in the user's cache folder
     (``step-stability.json``), so the checks of a protocol's many drives, and of later runs,
-    cost one scan. A grid point above ``overlap_m`` that is unstable falls back to the exact
-    two-point check of :func:`is_stable` at ``overlap_m``.
+    cost one scan; the shipped chains' verdicts at the shipped protocols' steps come with the
+    package (:mod:`sim_backend.dem.shipped_stability`). A grid point above ``overlap_m`` that is
+    unstable falls back to the exact two-point check of :func:`is_stable` at ``overlap_m``.
     """
-    key = _range_key(chain, integrator, h)
+    key = range_key(chain, integrator, h)
     v = _RANGE_CACHE.get(key)
     if v is None:
-        v = _disk_load(key)
+        v = _known(key)
         if v is None:
-            start = chain.delta0_m if chain.delta0_m > 0 else overlap_m / RANGE_RATIO**8
-            v = _RangeVerdict(start)
+            v = _RangeVerdict(_start_m(chain, overlap_m))
         if len(_RANGE_CACHE) > 256:
             _RANGE_CACHE.clear()
         _RANGE_CACHE[key] = v
@@ -547,20 +596,7 @@ def stable_up_to(chain: Chain, integrator: str, h: float, overlap_m: float) -> b
         return True
     if overlap_m >= v.unstable_at_m:
         return False
-    d = v.start_m if v.stable_to_m <= 0.0 else v.stable_to_m * RANGE_RATIO
-    grid = []  # the grid points still to check, up to the first at or above overlap_m
-    while d < v.unstable_at_m:
-        grid.append(d)
-        if d >= overlap_m:
-            break
-        d *= RANGE_RATIO
-    if grid:  # all at once (one compiled call), then in order up to the first unstable one
-        v.evaluations += len(grid)
-        for d, ok in zip(grid, _stable_many(chain, integrator, h, grid), strict=True):
-            if not ok:
-                v.unstable_at_m = d
-                break
-            v.stable_to_m = d
+    if _extend(v, chain, integrator, h, overlap_m):
         _disk_store(key, v)
     if overlap_m <= v.stable_to_m:
         return True
