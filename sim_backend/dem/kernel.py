@@ -28,6 +28,20 @@ sums the primary displacement and velocity (``u``, ``u'``) in registers; one alo
 carrying the neighbours' values in registers, gives the Hertz forces, the forces at the start
 velocities and, one contact behind, the stage velocities and the forces there.
 
+Steps split at the drives' breakpoints (``split_steps`` = 1, :mod:`sim_backend.dem.split_steps`):
+an analytic burst's start and end, where a moving wall's velocity jumps and the actuator
+contact's dashpot force with it, are known before the run. A step that holds one strictly inside
+is done as sub-steps of the same scheme between them (drift coefficients computed for their
+lengths, the last drift of one merged with the first of the next, the wall's work summed over
+their kicks), each evaluating the drive by the formula of its own side of the breakpoint;
+without this a jump between two kicks leaves an O(h) error that depends on where it falls
+(docs/performance.md, section 3). The samples that hold such a step are listed per chunk
+before the run, so a sample costs one comparison more; such a sample is run once per group of
+lanes with the same breakpoints in it, from its start state, each lane keeping its own group's
+pass, so a drive's result still does not depend on the batch around it, and a run without a
+breakpoint inside a step gives the same bits as with ``split_steps`` = 0. Table waveforms
+(linear interpolation: the slope jumps at every table sample) are not split.
+
 Optional (default off, results bit-for-bit unchanged): ``record_flags`` skips the recording of
 unrequested quantities (bit 0 velocity, 1 displacement, 2 drive; an unrequested output array is
 never touched, so it may have zero length), and ``stop_every > 0`` checks every ``stop_every``
@@ -47,6 +61,17 @@ from numpy.typing import NDArray
 
 from sim_backend.dem.kernel_cache import install_cache_locator
 from sim_backend.dem.simd import Vec4, vfma, vload, vmax, vsplat, vsqrt, vstore
+from sim_backend.dem.split_steps import (
+    find_breakpoints,
+    keep_lanes,
+    lane_groups,
+    load_state,
+    pass_drifts,
+    pass_entries,
+    save_state,
+    split_samples,
+    split_schedule,
+)
 
 install_cache_locator()  # compiled code goes to the user's cache folder, not next to the sources
 
@@ -54,7 +79,7 @@ __all__ = ["NUMERICS_VERSION", "drift_coefficients", "drive_value", "run_batch"]
 
 #: changes whenever the kernel's arithmetic changes its results beyond rounding; cached converged
 #: references (``sim_backend.dem.converged``) are keyed by it
-NUMERICS_VERSION = "2: SIMD kernel"
+NUMERICS_VERSION = "3: steps split at the burst ends"
 
 
 def drift_coefficients(
@@ -79,6 +104,23 @@ def drift_coefficients(
     return out
 
 
+@numba.njit(inline="always")
+def _burst(tau: float, prm: NDArray[np.float64]) -> tuple[float, float]:
+    """(value, d value/dt) of the analytic burst of :func:`drive_value` at ``tau`` s after its
+    start, by its formula whether or not ``0 < tau < T``."""
+    amp = prm[0]
+    sig = prm[3]
+    x = tau - prm[4]
+    g = math.exp(-x * x / (2.0 * sig * sig))
+    norm = 1.0 / (1.0 - prm[5])
+    env = (g - prm[5]) * norm
+    denv = -x / (sig * sig) * g * norm
+    om = 2.0 * math.pi * prm[1]
+    cs = math.cos(om * x)
+    sn = math.sin(om * x)
+    return amp * env * cs, amp * (denv * cs - env * om * sn)
+
+
 @numba.njit(cache=True)
 def drive_value(
     t: float, src: int, prm: NDArray[np.float64], table: NDArray[np.float64], n_table: int
@@ -96,16 +138,7 @@ def drive_value(
         T = prm[2]
         if tau <= 0.0 or tau >= T:
             return 0.0, 0.0
-        sig = prm[3]
-        x = tau - prm[4]
-        g = math.exp(-x * x / (2.0 * sig * sig))
-        norm = 1.0 / (1.0 - prm[5])
-        env = (g - prm[5]) * norm
-        denv = -x / (sig * sig) * g * norm
-        om = 2.0 * math.pi * prm[1]
-        cs = math.cos(om * x)
-        sn = math.sin(om * x)
-        return amp * env * cs, amp * (denv * cs - env * om * sn)
+        return _burst(tau, prm)
     rate = prm[7]
     xs = tau * rate
     if xs < 0.0 or xs >= n_table - 1:
@@ -115,6 +148,26 @@ def drive_value(
     a = table[j]
     b = table[j + 1]
     return amp * (a + fr * (b - a)), amp * (b - a) * rate
+
+
+@numba.njit(cache=True)
+def drive_piece(
+    t: float,
+    side: float,
+    src: int,
+    prm: NDArray[np.float64],
+    table: NDArray[np.float64],
+    n_table: int,
+) -> tuple[float, float]:
+    """:func:`drive_value` at ``t`` (s) by the formula that holds at ``side`` (s), a time between
+    the same two breakpoints (:mod:`sim_backend.dem.split_steps`): an analytic burst's value
+    and slope on that side of its start and end, also at the breakpoint itself."""
+    if src != 0 or prm[0] == 0.0:
+        return drive_value(t, src, prm, table, n_table)
+    tau_side = side - prm[6]
+    if tau_side <= 0.0 or tau_side >= prm[2]:
+        return 0.0, 0.0
+    return _burst(t - prm[6], prm)
 
 
 @numba.njit(cache=True)
@@ -320,10 +373,12 @@ def run_batch(
     drv: NDArray[np.float64],  # [R, S] out
     energy: NDArray[np.float64],  # [R, 3], [R, 5] or [R, 6] out: H(0), H(end), W
     # (, samples, E left (, total momentum at the end, oriented))
+    zeta: NDArray[np.float64],  # [2, N, K] damping ratio of each block mode (split steps' drifts)
     record_flags: int = 7,  # bit 0 velocity, bit 1 displacement, bit 2 drive
     stop_every: int = 0,  # > 0: check the energy left every stop_every samples
     stop_fraction: float = 0.0,  # stop once energy left <= stop_fraction * input work
     heun_kicks: int = 0,  # 1: damped kicks by Heun's third-order rule, 0: explicit midpoint
+    split_steps: int = 1,  # 1: steps split at the bursts' start and end (module docstring)
 ) -> None:
     n_chunks, W = lane_traj.shape
     N = phi0.shape[1]
@@ -363,6 +418,12 @@ def run_batch(
                 kick_dt[kk] = float(drift_a[stage]) * h
     kick_drift[n_kicks] = drift_seq[m]
     kick_dt[n_kicks] = float(drift_a[m]) * h
+    kick_side = np.full(n_kicks + 1, math.nan)  # no breakpoint in the sample's steps
+    kick_flag = np.zeros(n_kicks + 1, dtype=np.int64)  # bit 0: a pass's first drift, 1: its last
+    kick_flag[0] = 1
+    kick_flag[n_kicks] = 2
+    period = h * n_sub
+    nd = drift.shape[1]
     for ch in numba.prange(n_chunks):
         o = chunk_orient[ch]
         sign = -1.0 if o == 1 else 1.0  # recorded along the chain's axis (#1 towards #N)
@@ -387,7 +448,34 @@ def run_batch(
         d0 = rest[o]
         x0 = chi[o]
         im0 = inv_m0[o]
-        co = drift[o]
+        # steps split at the drives' breakpoints: the samples that hold one, per lane
+        bp_n = np.zeros(W, dtype=np.int64)
+        bp_smp = np.zeros((W, 2), dtype=np.int64)
+        bp_st = np.zeros((W, 2), dtype=np.int64)
+        bp_y = np.zeros((W, 2))
+        if split_steps == 1:
+            find_breakpoints(lanes, src, prm, period, h, n_sub, n_samples, bp_n, bp_smp, bp_st,
+                             bp_y)  # fmt: skip
+        split_at, n_pass_max = split_samples(bp_n, bp_smp, bp_st, bp_y)
+        # the drift kinds, then room for the split steps' drifts
+        co = np.empty((nd + n_pass_max * pass_drifts(m), N, K, 4))
+        co[:nd] = drift[o]
+        n_split = split_at.size
+        next_split = split_at[0] if n_split > 0 else -1
+        i_split = 0
+        n_sched = n_pass_max * pass_entries(n_kicks, m)
+        sk_drift = np.zeros(n_sched, dtype=np.int64)  # a split sample's schedule
+        sk_dt = np.zeros(n_sched)
+        sk_h = np.zeros(n_sched)
+        sk_side = np.zeros(n_sched)
+        sk_flag = np.zeros(n_sched, dtype=np.int64)
+        n_state = (2 * N * K * W + N * W + W) if n_split > 0 else 0
+        keep = np.zeros(n_state)  # the chunk's state at the split sample's start
+        res = np.zeros(n_state)  # and at its end, each lane from its own pass
+        group = np.zeros(W, dtype=np.int64)
+        t_start = 0.0
+        t_end = 0.0
+        ps = 0
         q3 = q.reshape((N, K, W))
         p3 = p.reshape((N, K, W))
         # the chunk's drives are all zero outside [t_on, t_off) (s)
@@ -449,10 +537,33 @@ def run_batch(
                     _copy_out(buf_vel, vel, lanes, s - slot, slot + 1, sign)
                     _copy_out(buf_disp, disp, lanes, s - slot, slot + 1, sign)
                     break
+            kd, kdt, kh, kside, kflag = kick_drift, kick_dt, kick_h, kick_side, kick_flag
+            n_entries = n_kicks + 1
+            split = s == next_split
+            if split:  # one pass per group of lanes with the same breakpoints in this sample
+                n_groups = lane_groups(s, bp_n, bp_smp, bp_st, bp_y, group)
+                n_entries = split_schedule(
+                    s, group, n_groups, bp_n, bp_smp, bp_st, bp_y, period, h, n_sub, kick_b,
+                    drift_a, kick_drift, kick_dt, kick_h, omega[o], zeta[o], co, nd, sk_drift,
+                    sk_dt, sk_h, sk_side, sk_flag,
+                )  # fmt: skip
+                kd, kdt, kh, kside, kflag = sk_drift, sk_dt, sk_h, sk_side, sk_flag
+                save_state(keep, q, p, force, work)
+                t_start = t
+                t_end = t  # the clock as a whole sample advances it
+                for kk in range(n_kicks + 1):
+                    t_end += kick_dt[kk]
+                ps = 0
             hk_prev = 0.0  # length (s) of the kick whose forces wait to be applied to p
-            for kk in range(n_kicks + 1):
-                dk = kick_drift[kk]
-                t += kick_dt[kk]
+            for kk in range(n_entries):
+                if kk > 0 and (kflag[kk] & 1) != 0:  # the next pass, from the sample's start
+                    keep_lanes(res, q, p, force, work, group, ps)
+                    ps += 1
+                    load_state(keep, q, p, force, work)
+                    t = t_start
+                    hk_prev = 0.0
+                dk = kd[kk]
+                t += kdt[kk]
                 # ---- pass 1, per cylinder: the pending kick, the drift, then u and u'
                 for i in range(N):
                     for g in range(0, W, lane_step):
@@ -478,14 +589,18 @@ def run_batch(
                         if pairs:
                             vstore(u, ja + 4, ub)
                             vstore(ud, ja + 4, vb)
-                hk = kick_h[kk]
+                hk = kh[kk]
                 hk_prev = hk
-                if kk == n_kicks:
-                    break
-                # ---- the drives at t
+                if (kflag[kk] & 2) != 0:
+                    continue
+                # ---- the drives at t (in a split step: on the sub-step's side of its breakpoints)
+                side = kside[kk]
                 for b in range(W):
                     r = lanes[b]
-                    if r >= 0 and t_on <= t < t_off:
+                    if r >= 0 and side == side:
+                        dval[b], ddot[b] = drive_piece(t, side, src[r], prm[r], tables[r],
+                                                       n_table[r])  # fmt: skip
+                    elif r >= 0 and t_on <= t < t_off:
                         dval[b], ddot[b] = drive_value(t, src[r], prm[r], tables[r], n_table[r])
                     else:
                         dval[b] = 0.0
@@ -572,6 +687,12 @@ def run_batch(
                         vstore(force, (j - 1) * W + g, f_prev - fj)
                         v_prev = v1
                         f_prev = fj
+            if split:  # every lane's state from the pass of its own breakpoints
+                keep_lanes(res, q, p, force, work, group, ps)
+                load_state(res, q, p, force, work)
+                t = t_end
+                i_split += 1
+                next_split = split_at[i_split] if i_split < n_split else -1
         # ---- energy at the end (and at the start: the static state)
         for b in range(W):
             r = lanes[b]

@@ -205,6 +205,7 @@ def simulate(
     stop_check_s: float = 0.5e-3,
     refuse_unstable: bool = True,
     dashpot_kick: Literal["midpoint", "heun3"] = "midpoint",
+    split_at_burst_ends: bool = True,
 ) -> SimResult:
     """Simulate every drive of ``drives`` on ``chain`` (one compiled batch, parallel over drives).
 
@@ -238,6 +239,10 @@ def simulate(
         second order for ``blanes-moan4`` (the other 4th/6th-order schemes cancel it) and shows
         below an error of about 1e-6, i.e. at steps under 1 us; ``"heun3"`` keeps
         ``blanes-moan4`` fourth order there for about a quarter more run time.
+    split_at_burst_ends: a step that holds a burst drive's start or end (where a moving wall's
+        velocity jumps) is done as sub-steps of the same scheme between them
+        (:mod:`sim_backend.dem.split_steps`); ``False`` steps over them as the kernel did before
+        (an O(h) error with the contact dashpot on), for comparison.
     """
     t_wall = time.perf_counter()
     name = DEFAULT_INTEGRATOR if integrator == "default" else integrator
@@ -275,6 +280,7 @@ def simulate(
     phi0 = np.stack([modes.phi0, modes.phi0[::-1]])
     omega = np.stack([modes.omega, modes.omega[::-1]])
     drift2 = np.stack([drift, drift[:, ::-1]])
+    zeta2 = np.stack([zeta, zeta[::-1]])
     chi = chain.hunt_crossley_chi_s_per_m()
     chi2 = np.stack([chi, chi[::-1]])
     rest = np.stack([chain.rest_overlap_m, chain.rest_overlap_m[::-1]])
@@ -331,9 +337,9 @@ def simulate(
             np.asarray(b_w, dtype=np.float64), np.asarray(a_w, dtype=np.float64),
             np.asarray(seq, dtype=np.int64), int(merge),
             h, n_sub, n_samples, chain.beta_c, rest, chain.f0_N,
-            1 if chain.far_end == "wall" else 0, rec_idx, vel, disp, drv, energy,
+            1 if chain.far_end == "wall" else 0, rec_idx, vel, disp, drv, energy, zeta2,
             rec_flags, stop_every, float(stop_energy_fraction or 0.0),
-            1 if dashpot_kick == "heun3" else 0,
+            1 if dashpot_kick == "heun3" else 0, 1 if split_at_burst_ends else 0,
         )  # fmt: skip
     n_done = energy[:, 3].astype(np.int64)
     if stop_every > 0:
@@ -354,6 +360,7 @@ def simulate(
         "sample_rate_Hz": sample_rate_Hz,
         "damped": chain.damped,
         "dashpot_kick": dashpot_kick,
+        "split_at_burst_ends": split_at_burst_ends,
         "input_work_J": work,
         "energy_gain_J": gain,
         "energy_residual_rel": (gain - work) / scale,
@@ -376,6 +383,7 @@ def simulate(
                 chain, drives, duration_s=(n_samples - 1) / sample_rate_Hz,
                 sample_rate_Hz=sample_rate_Hz / 2.0, cylinders=cylinders, integrator=name,
                 dt_s=2.0 * h, record=("velocity",), dashpot_kick=dashpot_kick,
+                split_at_burst_ends=split_at_burst_ends,
             ).velocity  # fmt: skip
             n_c = min(coarse.shape[-1], (vel.shape[-1] + 1) // 2)
             fine = vel[..., ::2][..., :n_c].copy()
