@@ -24,11 +24,20 @@ solver, and the step is stable exactly when they all lie in [-1, 1], i.e. when `
 the eigenvalues only when one fails. (The dense 2D x 2D eigenvalues agree to round-off:
 ``tests/dem/test_setup_cost.py``.)
 
-The largest stable step ``h_max`` is the smallest ``h`` with ``rho(P(h)) > 1 + tol``, found by a
-geometric scan from ``0.25 pi / w_top`` upwards (ratio 1.08) and a bisection to 0.2 %. For the
-default chain the first instability is the resonance of the stiffest block mode with the kicks
-(``h w_top`` near ``pi`` for ``strang``): unlike a leapfrog on the whole chain, the limit is set by
-the block modes integrated exactly, not by the contact frequency.
+The largest stable step ``h_max`` is the end of the small-step regime: the smallest ``h`` at which
+the step is unstable (``rho(P(h)) > 1 + tol``) or ``B`` stops being positive definite, found by a
+geometric scan from ``0.25 pi / w_top`` upwards (ratio 1.08) and a bisection to 0.2 %. ``B`` is
+``diag(sin(h w) / w)`` for the drift alone: it loses definiteness when an eigenvalue angle of the
+map reaches ``pi``, and (for the drift alone) stays indefinite until that angle reaches ``2 pi``,
+a factor of about 2 in ``h``, so the scan does not step over it. Below, the eigenvalues of one
+Krein signature keep to the upper half of the unit circle and cannot meet those of the other:
+every such step is stable. Above, stable and unstable steps alternate in narrow bands (the angles
+of the graded chain's block modes passing ``pi`` one by one): blanes-moan4 on the default chain
+is unstable in 85 bands between 6.024 and 8.286 us, the widest under 0.15 % (7.4 us among them),
+and stable at 8.22 us, which a scan for the first unstable step reported as the limit
+(``docs/stability.md``). For the default chain the limit is the resonance of the stiffest block
+mode with the kicks (``h w_top`` near ``pi``): unlike a leapfrog on the whole chain, the limit is
+set by the block modes integrated exactly, not by the contact frequency.
 
 Nonlinear stiffening: the Hertz stiffness grows as ``sqrt(d)``, so the contacts are linearised at
 a reference overlap ``d_ref = max(4 delta0, delta0 + 2 A_disp, ((F0 + 2 A_force) / beta_c)^(2/3))``
@@ -100,8 +109,10 @@ class StepLimit:
     """Result of :func:`largest_stable_step`.
 
     integrator: the splitting's name.
-    h_max_s: largest step (s) below which every scanned step is stable (inf: none unstable).
-    h_unstable_s: smallest step (s) found unstable (inf: none).
+    h_max_s: largest step (s) of the small-step regime, below which every step is stable (inf:
+        none unstable); see the module docstring.
+    h_unstable_s: smallest step (s) found past it: unstable, or ``B`` not positive definite
+        (inf: none).
     overlaps_m: contact overlaps (m) at which the contacts were linearised.
     stiffness_N_per_m: the matching contact stiffnesses (N/m).
     top_block_Hz: the stiffest block mode (Hz), integrated exactly by the drift.
@@ -326,14 +337,19 @@ def _position_blocks(
 
 
 def _window_stable_many(
-    win: _Window, integrator: str, h: float, stiffness: NDArray[np.float64]
+    win: _Window,
+    integrator: str,
+    h: float,
+    stiffness: NDArray[np.float64],
+    small_step: bool = False,
 ) -> list[bool]:
     """Whether ``rho <= 1 + STABILITY_TOL`` on one window, for each of M contact stiffnesses
     (N/m), by factorisations only where it can: the ``c`` lie in [-C, C] exactly when ``C B - A B``
     and ``C B + A B`` are positive definite (two Cholesky factorisations, LAPACK's ``dpotrf``:
     its ``info`` says, no exception), which also makes ``B = (C B - A B + C B + A B) / 2C``
     positive definite, the premise of the equivalence; anything else (a factorisation that
-    fails) is decided by the eigenvalues."""
+    fails) is decided by the eigenvalues. ``small_step``: also require ``B`` positive definite
+    (the small-step regime of :func:`largest_stable_step`)."""
     if not _palindromic(integrator):
         return [_window_radius(win, integrator, h, k) <= 1.0 + STABILITY_TOL for k in stiffness]
     from scipy.linalg.lapack import dpotrf
@@ -347,12 +363,21 @@ def _window_stable_many(
             dpotrf(np.subtract(cb, AB[o]).T, lower=1, clean=0, overwrite_a=1)[1] == 0
             and dpotrf(np.add(cb, AB[o], out=cb).T, lower=1, clean=0, overwrite_a=1)[1] == 0
         )
+        if not ok and small_step:
+            ok = dpotrf(Bs[o].T, lower=1, clean=0, overwrite_a=0)[1] != 0
+            if ok:  # B is not positive definite: past the small-step regime
+                out.append(False)
+                continue
         out.append(ok or _radius_from_blocks(A[o], Bs[o]) <= 1.0 + STABILITY_TOL)
     return out
 
 
 def _stable_many(
-    chain: Chain, integrator: str, h: float, overlaps_m: Sequence[float]
+    chain: Chain,
+    integrator: str,
+    h: float,
+    overlaps_m: Sequence[float],
+    small_step: bool = False,
 ) -> list[bool]:
     """``spectral_radius(...) <= 1 + STABILITY_TOL`` at each overlap (m), all at once (one
     compiled call per window for all of them), decided by :func:`_window_stable_many`."""
@@ -362,7 +387,7 @@ def _stable_many(
     out = [True] * ks.size
     with one_blas_thread():
         for w in _windows(chain):
-            for i, ok in enumerate(_window_stable_many(w, integrator, h, ks)):
+            for i, ok in enumerate(_window_stable_many(w, integrator, h, ks, small_step)):
                 out[i] = out[i] and ok
     return out
 
@@ -424,10 +449,10 @@ def largest_stable_step(
     n_win = len(_windows(chain))
     count = 0
 
-    def stable(h: float) -> bool:
+    def stable(h: float) -> bool:  # stable, and B positive definite (the small-step regime)
         nonlocal count
         count += 1
-        return is_stable(chain, integrator, h, overlap_m)
+        return all(_stable_many(chain, integrator, h, overlaps, small_step=True))
 
     inf = math.inf
     if not overlaps or max(stiff) == 0.0:

@@ -12,7 +12,7 @@ from instruments.burst import Burst
 from sim_backend import dem
 from sim_backend.dem.simulation import StepTooLargeError
 from sim_backend.dem.stability import CASES, run_case
-from sim_backend.dem.step_limit import largest_stable_step, spectral_radius
+from sim_backend.dem.step_limit import is_stable, largest_stable_step, spectral_radius
 
 
 @pytest.mark.parametrize("name", list(CASES))
@@ -40,6 +40,20 @@ def test_unstable_step_is_refused_with_the_largest_stable_step(undamped: dem.Cha
                        integrator="strang", dt_s=h_ok)  # fmt: skip
     assert res.meta["finite"]
     assert spectral_radius(undamped, "strang", lim.h_unstable_s, 4 * undamped.delta0_m) > 1.0
+
+
+def test_largest_stable_step_does_not_step_over_a_narrow_unstable_band(
+    undamped: dem.Chain,
+) -> None:
+    """blanes-moan4 on the default chain is unstable in bands under 0.2 % wide between 6.0 and
+    8.2 us (7.4 us among them); a scan for the first unstable step stepped over them all and
+    reported 8.22 us. The limit is now the end of the small-step regime: every step below it is
+    stable (400 steps from 0.3 h_max), the known unstable step lies above it."""
+    lim = largest_stable_step(undamped, "blanes-moan4")
+    assert not is_stable(undamped, "blanes-moan4", 7.4e-6)
+    assert 5e-6 < lim.h_max_s < 7.4e-6
+    for h in np.linspace(0.3 * lim.h_max_s, lim.h_max_s, 400):
+        assert is_stable(undamped, "blanes-moan4", float(h)), h
 
 
 def test_cli_simulate_dt_refusal_is_one_line(
