@@ -27,7 +27,7 @@ from sim_backend.dem.kernel_cache import install_cache_locator
 
 install_cache_locator()  # compiled code goes to the user's cache folder, not next to the sources
 
-__all__ = ["position_blocks"]
+__all__ = ["position_blocks", "warm_up"]
 
 
 @numba.njit(cache=True, nogil=True)
@@ -183,3 +183,18 @@ def position_blocks(
         np.zeros((n, 2 * K)),
     )
     return A, B
+
+
+def warm_up() -> None:
+    """Compile (or load) the compiled map now, on a one-cylinder window: ``biafc warmup`` calls
+    it, so that the first stability scan of a chain that ships no verdicts (a modified chain, a
+    study's cells) does not compile during a run."""
+    position_blocks(
+        np.ones((1, 1)),
+        np.zeros((1, 1, 4)),
+        np.zeros(2, dtype=np.int64),
+        np.ones(1),
+        np.ones(1),
+        left=True,
+        right=True,
+    )

@@ -357,3 +357,49 @@ def test_scan_verdicts_equal_the_dense_eigenvalues_on_the_default_chain(
             assert stable == (dense.max() <= 1.0 + step_limit.STABILITY_TOL), (h, ov / 1e-6)
             verdicts.add(stable)
     assert verdicts == {True, False}
+
+
+def test_block_modes_are_computed_once_per_chain_and_read_only(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Every ``simulate`` call and stability check asks for the block modes (31 eigenproblems,
+    about 1.2 ms): a second call on the same chain solves none, and nobody can alter them."""
+    chain = dem.build_chain(dem.default_chain_spec())
+    calls = {"eigh": 0}
+    eigh = simulation.eigh
+
+    def eigh_spy(a: np.ndarray, b: np.ndarray) -> object:
+        calls["eigh"] += 1
+        return eigh(a, b)
+
+    monkeypatch.setattr(simulation, "eigh", eigh_spy)
+    first = simulation.block_modes(chain)
+    assert calls["eigh"] == chain.n
+    again = simulation.block_modes(chain)
+    assert again is first and calls["eigh"] == chain.n
+    with pytest.raises(ValueError):
+        first.omega[0, 0] = 1.0
+    other = dem.build_chain(chain.spec.model_copy(update={"preload": 6.0}))  # its own modes
+    simulation.block_modes(other)
+    assert calls["eigh"] == 2 * chain.n
+
+
+def test_warmup_compiles_the_step_stability_map_too() -> None:
+    """``biafc warmup`` leaves nothing to compile for the first stability scan of a chain that
+    ships no verdicts (a modified chain, a study's cells): the compiled step map is loaded."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    probe = (
+        "from daq.cli.biafc import main\n"
+        "assert main(['warmup', '--quiet']) == 0\n"
+        "from sim_backend.dem import step_map\n"
+        "print('step map signatures', len(step_map._position_blocks.signatures))\n"
+    )
+    root = Path(__file__).resolve().parents[2]
+    env = {k: v for k, v in os.environ.items() if not k.startswith("NUMBA_CACHE")}
+    out = subprocess.run([sys.executable, "-c", probe], env=env, cwd=root, capture_output=True,
+                         text=True, check=True, timeout=300)  # fmt: skip
+    assert "step map signatures 1" in out.stdout
