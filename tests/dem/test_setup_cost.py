@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import types
+import weakref
 
 import numpy as np
 import pytest
@@ -128,6 +129,7 @@ def test_small_linear_algebra_runs_on_one_blas_thread(
 
     monkeypatch.setattr(simulation, "eigh", eigh_spy)
     monkeypatch.setattr(np.linalg, "eigvals", eigvals_spy)
+    monkeypatch.setattr(simulation, "_MODES", weakref.WeakKeyDictionary())  # solve them again
     with threadpool_limits(2, user_api="blas"):  # the user's (or the default) setting
         simulation.block_modes(chain)
         step_limit.spectral_radius(chain, "strang", 1e-6, chain.delta0_m)
