@@ -375,6 +375,7 @@ def test_block_modes_are_computed_once_per_chain_and_read_only(
         return eigh(a, b)
 
     monkeypatch.setattr(simulation, "eigh", eigh_spy)
+    monkeypatch.setattr(simulation, "_MODES", weakref.WeakKeyDictionary())  # as in a new process
     first = simulation.block_modes(chain)
     assert calls["eigh"] == chain.n
     again = simulation.block_modes(chain)
