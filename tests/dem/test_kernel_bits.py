@@ -1,0 +1,91 @@
+"""The compiled kernel's bits, pinned: a change of its loop structure that should not change its
+arithmetic (a faster pass, a different loop order) must give the same bits, and a change that
+does must change ``NUMERICS_VERSION`` and the checksums below together.
+
+The inputs are those of ``simulate`` on the benchmark chain, passed through float32 (so that a
+last-bit difference of the host's ``exp``/``sin`` in the model's setup cannot reach the kernel)
+and waveform drives made of exact binary fractions (no ``exp``/``cos`` in the kernel), so that
+the kernel computes with ``+ - *``, fused multiply-adds, ``max`` and ``sqrt`` only: IEEE
+operations with one result on any host."""
+
+from __future__ import annotations
+
+import hashlib
+import inspect
+from typing import Any
+
+import numpy as np
+import pytest
+
+from sim_backend import dem
+from sim_backend.dem import kernel, simulation
+from sim_backend.dem.spec import benchmark_chain_spec
+
+#: NUMERICS_VERSION these checksums belong to, and sha256 of (velocity, energy) per batch size
+PINNED = {
+    "version": "3: steps split at the burst ends",
+    4: "2b29e8e066c24d7aadc40bc6c599983f0c7db17e8ed2ef16d6d82e1ca7bdb833",
+    16: "ae6dcc8209a8a109b4023b77e3dfcac6d4cb363d831e04f86529e0136a5c483a",
+}
+
+
+def _tent(n: int) -> np.ndarray:  # type: ignore[type-arg]
+    k = np.arange(n, dtype=np.float64)
+    return np.minimum(k, n - 1 - k) / 32.0  # exact binary fractions
+
+
+def _kernel_args(n_drives: int) -> dict[str, Any]:
+    """The keyword arguments ``simulate`` gives ``run_batch`` for ``n_drives`` waveform drives
+    (both directions, displacement and force), float inputs rounded to float32."""
+    chain = dem.build_chain(benchmark_chain_spec())
+    captured: dict[str, Any] = {}
+
+    def capture(*args: Any) -> None:
+        names = list(inspect.signature(kernel.run_batch.py_func).parameters)
+        captured.update(zip(names, args, strict=False))
+
+    amp = float(np.float32(chain.delta0_m))
+    drives = []
+    for r in range(n_drives):
+        kind = "displacement" if r % 3 else "force"
+        scale = amp * (1 + r % 4) if kind == "displacement" else 2.0 * (1 + r % 4)
+        drives.append(
+            dem.Drive(
+                direction="ltr" if r % 2 == 0 else "rtl",
+                kind=kind,
+                amplitude=scale,
+                waveform=(_tent(40 + 8 * (r % 5)), 250e3),
+            )
+        )
+    mp = pytest.MonkeyPatch()
+    mp.setattr(simulation, "run_batch", capture)
+    try:
+        dem.simulate(chain, drives, duration_s=0.4e-3, sample_rate_Hz=250e3)
+    finally:
+        mp.undo()
+    outputs = ("vel", "disp", "drv", "energy")
+    for name, value in captured.items():
+        if name in outputs:
+            captured[name] = np.zeros_like(value)
+        elif isinstance(value, np.ndarray) and value.dtype == np.float64:
+            captured[name] = value.astype(np.float32).astype(np.float64)
+        elif isinstance(value, float):
+            captured[name] = float(np.float32(value))
+    return captured
+
+
+def _checksum(n_drives: int) -> str:
+    args = _kernel_args(n_drives)
+    kernel.run_batch(**args)
+    assert np.all(np.isfinite(args["vel"])) and np.abs(args["vel"]).max() > 0
+    digest = hashlib.sha256()
+    for name in ("vel", "disp", "drv", "energy"):
+        digest.update(np.ascontiguousarray(args[name]).tobytes())
+    return digest.hexdigest()
+
+
+@pytest.mark.parametrize("n_drives", [4, 16])
+def test_kernel_bits_are_pinned(n_drives: int) -> None:
+    """4 drives: chunks of four lanes; 16: chunks of eight (two vectors at a time)."""
+    assert kernel.NUMERICS_VERSION == PINNED["version"], "new numerics: re-pin the checksums"
+    assert _checksum(n_drives) == PINNED[n_drives]
