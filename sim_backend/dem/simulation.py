@@ -252,7 +252,8 @@ def simulate(
         velocities the kick changes: ``"midpoint"`` (explicit midpoint, the default) or
         ``"heun3"`` (Heun's third-order rule, one more force sweep). The midpoint's error is
         second order for ``blanes-moan4`` (the other 4th/6th-order schemes cancel it) and shows
-        below an error of about 1e-6, i.e. at steps under 1 us; ``"heun3"`` keeps
+        below an error of about 2e-6, i.e. at steps of 1 us and under (contact dashpot on; with
+        it off, the default, the two rules give the same result); ``"heun3"`` keeps
         ``blanes-moan4`` fourth order there for about a quarter more run time.
     split_at_burst_ends: a step that holds a burst drive's start or end (where a moving wall's
         velocity jumps) is done as sub-steps of the same scheme between them

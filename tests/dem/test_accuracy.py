@@ -3,6 +3,7 @@ step-doubling error estimate, ``biafc accuracy`` and ``biafc simulate``'s error 
 
 from __future__ import annotations
 
+import itertools
 import json
 from dataclasses import replace
 from pathlib import Path
@@ -63,6 +64,26 @@ def test_observed_orders_two_and_four(highamp: AccuracyScene) -> None:
         assert p is not None
         assert abs(p - nominal) < 0.4, (name, p)
         assert rows[0].rhs_evals == len(dem.INTEGRATORS[name][2]) * rows[0].steps
+
+
+def test_default_scheme_is_fourth_order_on_the_default_chain() -> None:
+    """``biafc accuracy``'s chain (the default: contact dashpot off), linear scene: the default
+    ``blanes-moan4`` keeps order 4 down to 0.25 us (1e-9), and Heun kicks change nothing there
+    (no dashpot). The kernel before the steps holding a burst's end were split
+    (``NUMERICS_VERSION`` 2) left an O(h^2) error from the wall's force kink there: local order
+    1.6 from 0.5 to 0.25 us, and a reference too poor (change 7.9e-8) to fit an order at all."""
+    scene = builtin_scene("linear", chain_spec=dem.default_chain_spec(), duration_s=2e-3)
+    ref = _quick_reference(scene)
+    ladder = (2e-6, 1e-6, 0.5e-6, 0.25e-6)
+    rows = [measure_fixed(scene, ref, "blanes-moan4", h) for h in ladder]
+    errs = [m.err_worst for m in rows]
+    p = observed_order(list(ladder), errs, ref.change_rel)
+    assert p is not None and p == pytest.approx(4.0, abs=0.1), (p, errs, ref.change_rel)
+    assert errs[-1] < 3e-9
+    local = [np.log2(a / b) for a, b in itertools.pairwise(errs)]
+    assert min(local) > 3.8, local
+    heun = measure_fixed(scene, ref, "blanes-moan4+heun3", 0.5e-6)
+    assert heun.err_worst == rows[2].err_worst
 
 
 def test_observed_order_ignores_floor_and_pre_asymptotic_points() -> None:
