@@ -214,3 +214,32 @@ def test_floor_kernels_run() -> None:
         assert math.isfinite(rates[key]) and rates[key] > 0, key
     assert rates["sqrt"] < rates["fma"]
     assert peak_flops(repeats=1, n_iter=10_000) > 0
+
+
+@pytest.mark.parametrize(
+    ("body", "counts"),
+    [
+        ("_sqrt_lanes", {"vsqrtpd": 8, "vaddpd": 8}),
+        ("_other_lanes", {"vmaxpd": 8, "vaddpd": 8, "vmulpd": 4}),
+        ("_fma_lanes", {"vfmadd": 10}),
+        ("_mixed_lanes", {"vfmadd": 10, "vmaxpd": 4, "vaddpd": 4, "vmulpd": 2}),
+    ],
+)
+def test_rate_kernels_issue_the_instructions_they_count(body: str, counts: dict[str, int]) -> None:
+    """The loop of each measuring kernel is the instructions its rate divides by, one each (a
+    lane-wise max of two variables would be a max, a compare and a blend: not what the
+    kernel's max against 0 costs); at most a multiple of them if LLVM unrolls."""
+    import benchmarks._floor as floor
+
+    fn = getattr(floor, body)
+    fn(2, 0)
+    asm = fn.inspect_asm(fn.signatures[0])
+    assert "vblendv" not in asm and "vcmpunord" not in asm
+    # the hottest loop: the basic block holding the most of the first counted instruction
+    blocks = asm.split("\n.LBB")
+    first = next(iter(counts))
+    loop = max(blocks, key=lambda b: b.count(first))
+    n = loop.count(first) // counts[first]
+    assert n >= 1
+    for ins, c in counts.items():
+        assert loop.count(ins) == c * n, (body, ins, loop.count(ins), c * n)
