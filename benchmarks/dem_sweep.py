@@ -44,7 +44,7 @@ from __future__ import annotations
 import math
 import os
 import time
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
@@ -399,7 +399,10 @@ def scaling_rows() -> list[dict[str, Any]]:
 # --- time to 1e-6 and 1e-8 (issue 18) --------------------------------------------------------
 
 #: the ladder: (integrator, dashpot kick) at steps (s), coarse to fine
-ACCURACY_LADDER = (("blanes-moan4", "midpoint"), ("blanes-moan4", "heun3"))
+ACCURACY_LADDER: tuple[tuple[str, Literal["midpoint", "heun3"]], ...] = (
+    ("blanes-moan4", "midpoint"),
+    ("blanes-moan4", "heun3"),
+)
 ACCURACY_STEPS_S = (2e-6, 1e-6, 0.5e-6, 0.25e-6, 0.125e-6, 62.5e-9)
 #: the reference: yoshida6 at these steps; its last change says how far it is converged
 ACCURACY_REFERENCE_STEPS_S = (31.25e-9, 15.625e-9)
