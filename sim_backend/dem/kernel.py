@@ -54,6 +54,7 @@ when ``energy`` has 5 columns).
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numba
 import numpy as np
@@ -80,6 +81,20 @@ __all__ = ["NUMERICS_VERSION", "drift_coefficients", "drive_value", "run_batch"]
 #: changes whenever the kernel's arithmetic changes its results beyond rounding; cached converged
 #: references (``sim_backend.dem.converged``) are keyed by it
 NUMERICS_VERSION = "3: steps split at the burst ends"
+
+#: run_batch is parallel over its chunks (prange) and nothing else: numba's conversion of the
+#: chunk body's array allocations and copies into nested parallel loops, and their fusion, only
+#: cost compile time (they run once per chunk, inside a loop that is already parallel)
+_ONLY_PRANGE: Any = {  # numba accepts these options where its stubs say bool
+    "prange": True,
+    "comprehension": False,
+    "reduction": False,
+    "inplace_binop": False,
+    "setitem": False,
+    "numpy": False,
+    "stencil": False,
+    "fusion": False,
+}
 
 
 def drift_coefficients(
@@ -342,7 +357,7 @@ def _kick_end(
         vstore(force, j, k2_left - k2_right)
 
 
-@numba.njit(cache=True, parallel=True)
+@numba.njit(cache=True, parallel=_ONLY_PRANGE)
 def run_batch(
     phi0: NDArray[np.float64],  # [2, N, K] primary component of mass-normalised block modes
     omega: NDArray[np.float64],  # [2, N, K] block mode angular frequencies
