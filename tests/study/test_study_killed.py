@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from daq.cli.biafc import main
-from daq.store.lock import lock_path
+from daq.store.lock import lock_path, read_lock
 from protocols.studyfile import StudyFileError, read_study
 
 from .conftest import TINY
@@ -148,7 +148,9 @@ def test_a_second_study_writing_the_same_output_is_refused_in_one_line(
     proc = _spawn(study, out)
     try:
         t_end = time.monotonic() + 120
-        while not lock_path(out).exists():
+        # the lock written, not only created: a writer stopped between the two would hold an
+        # empty lock, which the second study cannot attribute to a process
+        while read_lock(out) is None:
             assert proc.poll() is None, proc.communicate()
             assert time.monotonic() < t_end
             time.sleep(0.005)
