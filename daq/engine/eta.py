@@ -55,8 +55,10 @@ ARM_S = 0.5
 #: seconds of DEM per cylinder-mode and step (kernel throughput on a 2024 laptop core; the
 #: measured point times replace it during a run)
 SECONDS_PER_MODE_STEP = 25e-9
-#: first use of the model on a machine: numba compiles the kernel (then cached on disk)
-COMPILE_S = 15.0
+#: first use of the model on a machine: numba compiles the kernel (then cached on disk); measured
+#: 2026-11-25 on a 2-core host: 24 s quiet, 34 s in a fresh-clone README run (15 s before the
+#: split steps; docs/performance.md section 3)
+COMPILE_S = 25.0
 #: simulated bench, per point and per recorded sample (emulators, noise, digitiser)
 SIM_POINT_S = 2e-3
 SIM_SAMPLE_S = 7e-8
