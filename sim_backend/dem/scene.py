@@ -51,12 +51,9 @@ from sim_backend.dem.condense import (
 from sim_backend.dem.drive import Drive
 from sim_backend.dem.linear_response import linear_response
 from sim_backend.dem.simulation import (
-    DEFAULT_DT_S,
-    DEFAULT_DT_TOP_HZ,
-    DEFAULT_INTEGRATOR,
     DEFAULT_SAMPLE_RATE_HZ,
     RECORDABLE,
-    block_modes,
+    default_step_s,
     simulate,
 )
 
@@ -233,9 +230,7 @@ def linearisation_error(rho: float, record: Sequence[str]) -> float:
 
 def _kernel_cost(chain: Chain) -> float:
     """Relative cost of one simulated second: (J + 1) block modes per cylinder over the step."""
-    f_top = float(block_modes(chain).omega.max()) / (2.0 * math.pi)
-    dt = DEFAULT_DT_S[DEFAULT_INTEGRATOR] * min(1.0, DEFAULT_DT_TOP_HZ / f_top)
-    return chain.n * (chain.n_modes + 1) / dt
+    return chain.n * (chain.n_modes + 1) / default_step_s(chain)
 
 
 def _plan_modes(scene: Scene, tol: SceneTolerances, linear_regime: bool) -> tuple[Chain, Decision]:

@@ -82,21 +82,12 @@ def lookup(key: str) -> tuple[float, float, float] | None:
 def checked_step(chain: Any, rate_Hz: float, integrator: str = "default") -> float:
     """The step (s) that ``simulate(chain, ..., sample_rate_Hz=rate_Hz, error_estimate=True)``
     checks with the integrator's default step: ``2h``, the step of the error estimate's rerun
-    at ``rate_Hz / 2`` (the same arithmetic as :func:`sim_backend.dem.simulation.simulate`)."""
-    from sim_backend.dem.simulation import (
-        DEFAULT_DT_S,
-        DEFAULT_DT_TOP_HZ,
-        DEFAULT_INTEGRATOR,
-        block_modes,
-    )
+    at ``rate_Hz / 2`` (by simulate's own step functions)."""
+    from sim_backend.dem.simulation import DEFAULT_INTEGRATOR, default_step_s, steps_per_sample
 
     name = DEFAULT_INTEGRATOR if integrator == "default" else integrator
-    f_top = float(block_modes(chain).omega.max()) / (2.0 * math.pi)
-    dt_req = DEFAULT_DT_S[name] * min(1.0, DEFAULT_DT_TOP_HZ / f_top)
-    period = 1.0 / rate_Hz
-    h = period / max(1, math.ceil(period / dt_req - 1e-9))
-    period2 = 1.0 / (rate_Hz / 2.0)
-    return period2 / max(1, math.ceil(period2 / (2.0 * h) - 1e-9))
+    _, h = steps_per_sample(default_step_s(chain, name), rate_Hz)
+    return steps_per_sample(2.0 * h, rate_Hz / 2.0)[1]
 
 
 def shipped_configurations() -> list[tuple[str, Any, str, float, float]]:

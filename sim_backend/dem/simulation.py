@@ -31,7 +31,9 @@ __all__ = [
     "SimResult",
     "StepTooLargeError",
     "block_modes",
+    "default_step_s",
     "simulate",
+    "steps_per_sample",
 ]
 
 _W1 = 1.0 / (2.0 - 2.0 ** (1.0 / 3.0))
@@ -163,6 +165,22 @@ def _block_modes(chain: Chain) -> BlockModes:
     return BlockModes(phi0, omega)
 
 
+def default_step_s(chain: Chain, integrator: str = DEFAULT_INTEGRATOR) -> float:
+    """The integrator's default step (s) on ``chain``: ``DEFAULT_DT_S[integrator]``, scaled down
+    by ``DEFAULT_DT_TOP_HZ / f_top`` when the stiffest block mode ``f_top`` is above it (the
+    accuracy rule of :func:`simulate`, the stability cases and the scene planner)."""
+    f_top = float(block_modes(chain).omega.max()) / (2.0 * math.pi)
+    return DEFAULT_DT_S[integrator] * min(1.0, DEFAULT_DT_TOP_HZ / f_top)
+
+
+def steps_per_sample(dt_s: float, sample_rate_Hz: float) -> tuple[int, float]:
+    """``(n_sub, h)``: the whole number of steps per sample period that keeps each step at most
+    ``dt_s`` (s), and that step ``h = period / n_sub`` (s), as :func:`simulate` takes them."""
+    period = 1.0 / sample_rate_Hz
+    n_sub = max(1, math.ceil(period / dt_s - 1e-9))
+    return n_sub, period / n_sub
+
+
 def _scheme(a: Sequence[float]) -> tuple[list[float], list[int], int]:
     """Distinct drift sizes, the kind of each drift a_k, and the kind of the merged a_m + a_0."""
     sizes = [*a, a[-1] + a[0]]
@@ -274,16 +292,10 @@ def simulate(
         raise ValueError(f"dashpot_kick: 'midpoint' or 'heun3', got {dashpot_kick!r}")
     order, a_w, b_w = INTEGRATORS[name]
     modes = block_modes(chain)
-    if dt_s is None:
-        f_top = float(modes.omega.max()) / (2.0 * math.pi)
-        dt_req = DEFAULT_DT_S[name] * min(1.0, DEFAULT_DT_TOP_HZ / f_top)
-    else:
-        dt_req = float(dt_s)
+    dt_req = default_step_s(chain, name) if dt_s is None else float(dt_s)
     if not (math.isfinite(dt_req) and dt_req > 0):
         raise ValueError(f"dt_s must be > 0, got {dt_s!r}")
-    period = 1.0 / sample_rate_Hz
-    n_sub = max(1, math.ceil(period / dt_req - 1e-9))
-    h = period / n_sub
+    n_sub, h = steps_per_sample(dt_req, sample_rate_Hz)
     if dt_s is not None and refuse_unstable:  # an explicit step: refuse a linearly unstable one
         check_step(chain, name, h, drives)
     n_samples = math.floor(duration_s * sample_rate_Hz + 1e-9) + 1

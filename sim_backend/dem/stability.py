@@ -22,12 +22,11 @@ from instruments.burst import Burst
 from sim_backend.dem.chain import Chain, build_chain
 from sim_backend.dem.drive import Drive
 from sim_backend.dem.simulation import (
-    DEFAULT_DT_S,
-    DEFAULT_DT_TOP_HZ,
     DEFAULT_INTEGRATOR,
     SimResult,
     StepTooLargeError,
     block_modes,
+    default_step_s,
     simulate,
 )
 from sim_backend.dem.spec import ChainSpec, default_chain_spec
@@ -93,7 +92,7 @@ def choose_step(
 ) -> tuple[float, str]:
     """(step in s, why): the default accuracy rule, capped at half the largest stable step."""
     f_top = float(block_modes(chain).omega.max()) / (2.0 * math.pi)
-    dt_acc = DEFAULT_DT_S[integrator] * min(1.0, DEFAULT_DT_TOP_HZ / f_top)
+    dt_acc = default_step_s(chain, integrator)
     overlap = reference_overlap_m(chain, drives)
     lim = largest_stable_step(chain, integrator, overlap)
     dt = min(dt_acc, 0.5 * lim.h_max_s)
