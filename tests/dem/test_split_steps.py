@@ -97,3 +97,19 @@ def test_a_drive_gives_the_same_bits_whatever_the_breakpoints_beside_it(
         alone = _run(chain, [drives[r]], **kw)
         np.testing.assert_array_equal(batch.velocity[r], alone.velocity[0])
         np.testing.assert_array_equal(four.velocity[r], alone.velocity[0])
+
+
+def test_sub_step_drifts_use_the_formula_of_the_whole_steps() -> None:
+    """``split_steps.drift_into`` (scalar, inside the kernel) and ``kernel.drift_coefficients``
+    (numpy, for whole steps) are two writings of one formula: they must agree, rigid modes,
+    damping and backward sub-steps included."""
+    from sim_backend.dem.kernel import drift_coefficients
+    from sim_backend.dem.split_steps import drift_into
+
+    omega = np.array([[0.0, 2e3, 5e4, 5.2e5], [0.0, 1.1e3, 7e4, 4.9e5]])
+    zeta = np.array([[0.0, 0.002, 0.01, 0.3], [0.0, 0.0, 0.05, 0.002]])
+    for length in (2e-6, 0.37e-6, -1.1e-6, 5e-5):
+        out = np.empty((*omega.shape, 4))
+        drift_into(out, omega, zeta, length)
+        np.testing.assert_allclose(out, drift_coefficients(omega, zeta, length), rtol=1e-12,
+                                   atol=1e-22)  # fmt: skip
