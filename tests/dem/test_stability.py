@@ -23,6 +23,20 @@ def test_case_passes(name: str) -> None:
     assert res.dt_s > 0 and res.step_reason
 
 
+def test_the_damped_variants_of_the_extreme_cases_have_a_contact_dashpot() -> None:
+    """drive-50-delta0 and zero-preload check that the contact dashpot stays passive and finite
+    at a tiny preload: with the dashpot off (the default chain's since it changed) they checked
+    nothing: chi = 0 s/m, and the damped run (fast window) kept 0.80 of the input work, 0.52
+    with the dashpot."""
+    import re
+
+    chi = re.search(r"chi = ([0-9.e+-]+) s/m", " ".join(run_case("zero-preload", fast=True).notes))
+    assert chi is not None and float(chi.group(1)) > 100.0
+    kept = re.search(r"kept ([0-9.]+) of the input work",
+                     " ".join(run_case("drive-50-delta0", fast=True).notes))  # fmt: skip
+    assert kept is not None and float(kept.group(1)) < 0.65
+
+
 def test_unstable_step_is_refused_with_the_largest_stable_step(undamped: dem.Chain) -> None:
     drive = dem.Drive("ltr", "displacement", 0.5 * undamped.delta0_m, burst=Burst(8.92e3))
     lim = largest_stable_step(undamped, "strang")
