@@ -2,16 +2,29 @@
 
 HDF5's own file locking does not help here: a resume clears the SWMR flags of a killed file
 before it opens it, and a second process doing so under a live writer corrupts the file. So a
-writer (a new run, a resume, ``biafc repair``) first creates ``RUN.h5.lock`` exclusively
-(``O_CREAT | O_EXCL``) with its host, PID, process start time and command line. A second
-writer is refused (:class:`FileInUse`, exit status 2) with a message naming the other process.
+writer (a new run, a resume, ``biafc repair``, ``biafc study``) first publishes ``RUN.h5.lock``
+with its host, PID, process start time and command line. A second writer is refused
+(:class:`FileInUse`, exit status 2) with a message naming the other process.
+
+The lock is published whole: its content is written (and synced) to a temporary file of this
+process in the same folder, which is then hard-linked to the lock's name (``os.link`` fails
+if the name exists, so exactly one writer wins) and removed. A lock file therefore never exists
+without its content, whatever moment a writer is killed or preempted at. (On a file system
+without hard links the lock is created with ``O_CREAT | O_EXCL`` and then written, as before.)
+
 A lock left by a process that no longer runs on this host (killed, crashed) is stale and taken
 over; a lock from another host is never taken over (its process cannot be checked from here):
-the message says which file to delete once that run is known to be over.
+the message says which file to delete once that run is known to be over. A takeover holds an
+``flock`` on the stale lock file itself while it checks that the name still points to that
+file, reads it again and removes it, so two processes taking over the same stale lock at once
+cannot both win (the second finds the name now points elsewhere and looks again). An empty or
+unreadable lock (left by an older version, which created the file before writing it, or made
+by hand) is waited for :data:`UNREADABLE_GRACE_S` and then taken over the same way.
 """
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
 import socket
@@ -21,6 +34,10 @@ from pathlib import Path
 from typing import Any
 
 __all__ = ["FileInUse", "RunFileLock", "in_use_by", "lock_path", "read_lock"]
+
+#: an empty or unreadable lock younger than this (s, by its modification time) may still be
+#: being written by an older version of this module; it is waited for, then taken over
+UNREADABLE_GRACE_S = 2.0
 
 
 class FileInUse(RuntimeError):
@@ -94,33 +111,119 @@ class RunFileLock:
     def acquire(self) -> RunFileLock:
         """Take the lock or raise :class:`FileInUse` naming the process that holds it."""
         self.lock.parent.mkdir(parents=True, exist_ok=True)
-        for _ in range(20):
-            try:
-                fd = os.open(self.lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
-            except FileExistsError:
-                other = read_lock(self.path)
-                if other is None:  # being written this instant, or garbage
-                    time.sleep(0.05)
-                    other = read_lock(self.path)
-                    if other is None and self.lock.exists():
-                        age = time.time() - self.lock.stat().st_mtime
-                        if age < 2.0:
-                            continue
-                if other is not None and not self._stale(other):
-                    raise FileInUse(self._in_use(other)) from None
-                self.stale_note = "taken over a stale lock" + (
-                    f" of process {other.get('pid')} on {other.get('host')} "
-                    f"(since {other.get('since')})"
-                    if other
-                    else ""
-                )
-                self.lock.unlink(missing_ok=True)
+        self._remove_dead_temps()
+        content = json.dumps(self._info()).encode()
+        deadline = time.monotonic() + UNREADABLE_GRACE_S + 1.0
+        while time.monotonic() < deadline:
+            if self._publish(content):
+                self.held = True
+                return self
+            other, unreadable_age = self._look()
+            if other is not None and not self._stale(other):
+                raise FileInUse(self._in_use(other))
+            if other is None and unreadable_age is None:
+                continue  # gone meanwhile (released, or taken over by another): try again
+            if unreadable_age is not None and unreadable_age < UNREADABLE_GRACE_S:
+                time.sleep(0.05)  # may be an older version's lock, being written
                 continue
-            with os.fdopen(fd, "w") as f:
-                json.dump(self._info(), f)
-            self.held = True
-            return self
-        raise FileInUse(f"{self.path}: cannot take its lock {self.lock}")
+            note = self._take_over_stale()
+            if note is not None:
+                self.stale_note = note
+        raise FileInUse(
+            f"{self.path}: cannot take its lock {self.lock} (it stays empty or unreadable); "
+            "if no run writes this file, delete the lock"
+        )
+
+    def _publish(self, content: bytes) -> bool:
+        """Create the lock with ``content`` in one step; False when the name is taken."""
+        tmp = self.lock.with_name(f".{self.lock.name}.{os.getpid()}-{os.urandom(4).hex()}.tmp")
+        fd = os.open(tmp, os.O_CREAT | os.O_TRUNC | os.O_WRONLY, 0o644)
+        try:
+            with os.fdopen(fd, "wb") as f:
+                f.write(content)
+                f.flush()
+                os.fsync(f.fileno())  # a power cut leaves a whole lock or none
+            try:
+                os.link(tmp, self.lock)  # fails if the name exists: one writer wins
+                return True
+            except FileExistsError:
+                return False
+            except OSError:  # a file system without hard links: create, then write
+                return self._publish_without_links(content)
+        finally:
+            tmp.unlink(missing_ok=True)
+
+    def _publish_without_links(self, content: bytes) -> bool:
+        try:
+            fd = os.open(self.lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+        except FileExistsError:
+            return False
+        with os.fdopen(fd, "wb") as f:
+            f.write(content)
+            f.flush()
+            os.fsync(f.fileno())
+        return True
+
+    def _remove_dead_temps(self) -> None:
+        """Remove the temporary lock files of writers killed while publishing."""
+        for tmp in self.lock.parent.glob(f".{self.lock.name}.*.tmp"):
+            try:
+                pid = int(tmp.name[len(self.lock.name) + 2 :].split("-", 1)[0])
+            except ValueError:
+                continue
+            if pid != os.getpid() and not _alive(pid, None):
+                tmp.unlink(missing_ok=True)
+
+    def _look(self) -> tuple[dict[str, Any] | None, float | None]:
+        """``(content, None)`` of the lock; ``(None, age in s)`` when it is there but empty or
+        unreadable; ``(None, None)`` when it is gone."""
+        try:
+            st = os.stat(self.lock)
+        except FileNotFoundError:
+            return None, None
+        other = read_lock(self.path)
+        if other is not None:
+            return other, None
+        if not self.lock.exists():
+            return None, None
+        return None, max(0.0, time.time() - st.st_mtime)
+
+    def _take_over_stale(self) -> str | None:
+        """Remove the lock if it is (still) stale or unreadable, under an ``flock`` of that
+        very file, so that of two processes taking it over at once only one removes it (the
+        other then finds the name gone or pointing to the winner's lock). Returns the note
+        to log, or ``None`` when nothing was removed (look again)."""
+        try:
+            fd = os.open(self.lock, os.O_RDONLY)
+        except FileNotFoundError:
+            return None
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX)
+            try:
+                if os.stat(self.lock).st_ino != os.fstat(fd).st_ino:
+                    return None  # removed and published again meanwhile
+            except FileNotFoundError:
+                return None
+            raw = os.pread(fd, 1 << 16, 0)
+            try:
+                other: dict[str, Any] | None = dict(json.loads(raw))
+            except (ValueError, TypeError):
+                other = None
+            if other is None:
+                age = time.time() - os.fstat(fd).st_mtime
+                if age < UNREADABLE_GRACE_S:
+                    return None
+            elif not self._stale(other):
+                return None  # the loop looks again and names its holder
+            os.unlink(self.lock)
+        finally:
+            os.close(fd)  # also releases the flock
+        if other is None:
+            return "taken over an empty or unreadable lock"
+        return (
+            f"taken over a stale lock of process {other.get('pid')} on {other.get('host')} "
+            f"(since {other.get('since')})"
+        )
 
     @staticmethod
     def _stale(other: dict[str, Any]) -> bool:

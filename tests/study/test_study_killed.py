@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from daq.cli.biafc import main
-from daq.store.lock import lock_path, read_lock
+from daq.store.lock import lock_path
 from protocols.studyfile import StudyFileError, read_study
 
 from .conftest import TINY
@@ -148,9 +148,9 @@ def test_a_second_study_writing_the_same_output_is_refused_in_one_line(
     proc = _spawn(study, out)
     try:
         t_end = time.monotonic() + 120
-        # the lock written, not only created: a writer stopped between the two would hold an
-        # empty lock, which the second study cannot attribute to a process
-        while read_lock(out) is None:
+        # the lock is published whole (daq.store.lock), so once it exists it names its
+        # writer, whatever moment the writer is stopped at
+        while not lock_path(out).exists():
             assert proc.poll() is None, proc.communicate()
             assert time.monotonic() < t_end
             time.sleep(0.005)
