@@ -7,13 +7,19 @@ Configuration, as the programming guide orders it (per channel ``n``)::
     FORM:BORD SWAP                              binary blocks little-endian (set explicitly)
     SOURn:DATA:ARB:DAC BIAFCn,#<n><len><int16...>   the burst as DAC codes -32767..32767
     SOURn:FUNC ARB ; SOURn:FUNC:ARB BIAFCn ; SOURn:FUNC:ARB:SRAT <Sa/s>
-    OUTPn:LOAD INF                              high impedance (piezo amplifier input)
+    SOURn:VOLT:LIM:STAT OFF                     the load cannot change while limits are on
+    OUTPn:LOAD INF ; SOURn:VOLT:UNIT VPP         high impedance (piezo amplifier input), Vpp
     SOURn:VOLT:LIM:HIGH/LOW, SOURn:VOLT:LIM:STAT ON  hard output limits (bench safety)
     SOURn:VOLT <Vpp> ; SOURn:VOLT:OFFS <V>
     SOURn:BURS:MODE TRIG ; SOURn:BURS:NCYC 1 ; SOURn:BURS:STAT ON
     TRIGn:SOUR BUS|EXT|IMM
     OUTP:TRIG:SOUR CHn ; OUTP:TRIG:SLOP POS ; OUTP:TRIG ON   trigger out to the digitiser
-    SYST:ERR? until +0                          any error: outputs off, ReplyError
+    every setting above queried back             (instruments.keysight_readback)
+    SYST:ERR? until +0                          a mismatch or an error: outputs off, ReplyError
+
+What the channel reports holding after this (not what was asked) is what :meth:`snapshot`
+records: a coerced value (an amplitude clipped, a rate quantised, a load change refused) is an
+error naming the setting, the request and the read-back value, never a silent record.
 
 The instrument plays an arbitrary waveform of ``n`` points in ``n / SRAT`` seconds (point ``k``
 at ``k / SRAT``): a burst sampled over its window ``T`` with ``n`` points (first and last at 0
@@ -39,6 +45,7 @@ from numpy.typing import NDArray
 from instruments.burst import burst_samples
 from instruments.errors import InstrumentError, InstrumentTimeout, LimitError, ReplyError
 from instruments.interfaces import BurstConfig, Transport
+from instruments.keysight_readback import ChannelReadback, ChannelRequest, read_channel
 
 __all__ = ["DAC_FULL_SCALE", "GeneratorLimits", "KeysightGenerator", "dac_codes"]
 
@@ -148,7 +155,7 @@ class KeysightGenerator:
         self.channels = tuple(channels)
         self._configs: dict[int, BurstConfig] = {}
         self._outputs: dict[int, bool] = {ch: False for ch in self.channels}
-        self._played_rate: dict[int, float] = {}
+        self._readback: dict[int, ChannelReadback] = {}
         self._idn: str | None = None
 
     # --- link -------------------------------------------------------------------------------
@@ -257,7 +264,8 @@ class KeysightGenerator:
     ) -> None:
         """As :meth:`configure_burst` with explicit normalised ``samples`` ``[n]`` (|x| <= 1)
         played at ``sample_rate_Hz`` (Sa/s; default ``config.sample_rate_Hz``): point ``k`` at
-        ``k / sample_rate_Hz`` s. The rate is read back and must agree to 1e-6."""
+        ``k / sample_rate_Hz`` s. Every setting is read back and compared
+        (:mod:`instruments.keysight_readback`: the rate to 1e-6, voltages to 0.1 % + 0.1 mV)."""
         self._check_channel(channel)
         self.limits.check(config)
         rate = float(config.sample_rate_Hz if sample_rate_Hz is None else sample_rate_Hz)
@@ -273,51 +281,71 @@ class KeysightGenerator:
             )
         data = codes.astype("<i2").tobytes()
         self._configs.pop(channel, None)
+        self._readback.pop(channel, None)
         n = channel
         peak = self.limits.max_generator_peak_V
-        name = f"BIAFC{n}"
+        request = ChannelRequest(
+            arb_name=f"BIAFC{n}",
+            sample_rate_Hz=rate,
+            amplitude_Vpp=config.amplitude_Vpp,
+            offset_V=config.offset_V,
+            limit_high_V=peak,
+            limit_low_V=-peak,
+            trigger_source=_TRIGGER_SOURCE[config.trigger_source],
+        )
         try:
-            self._write_config(n, name, data, config, peak, rate)
-            self.check_errors(f"configuring channel {n}")
-            got = float(self._query(f"SOUR{n}:FUNC:ARB:SRAT?"))
-            if abs(got - rate) > 1e-6 * rate:
-                raise ReplyError(
-                    f"{self.transport.name}: channel {n} plays at {got:.10g} Sa/s, "
-                    f"set {rate:.10g} Sa/s"
-                )
-        except ValueError:
-            self.safe_state()
-            raise ReplyError(f"{self.transport.name}: unreadable SRAT? reply") from None
+            self._write_config(n, data, request)
+            held = self._check_held(n, request)
         except InstrumentError:
             self.safe_state()
             raise
-        self._played_rate[channel] = got
+        self._readback[channel] = held
         self._configs[channel] = config
         self._outputs[channel] = False
 
-    def _write_config(
-        self, n: int, name: str, data: bytes, config: BurstConfig, peak_V: float, rate: float
-    ) -> None:
+    def held(self, channel: int) -> ChannelReadback | None:
+        """What ``channel`` reported holding after its last configuration (None before)."""
+        return self._readback.get(channel)
+
+    def _check_held(self, n: int, request: ChannelRequest) -> ChannelReadback:
+        """Read channel ``n`` back, then drain the error queue; :class:`ReplyError` naming every
+        mismatch (setting, requested and read-back value, tolerance) and every queued error."""
+        name = self.transport.name
+        held, mismatches = read_channel(self._query, name, n, request)
+        errs = self.errors()
+        if mismatches:
+            also = f"; instrument errors: {'; '.join(errs)}" if errs else ""
+            raise ReplyError(f"{name}: {'; '.join(mismatches)}{also}")
+        if errs:
+            raise ReplyError(f"{name}: configuring channel {n}: " + "; ".join(errs))
+        return held
+
+    def _write_config(self, n: int, data: bytes, req: ChannelRequest) -> None:
+        """The configuration of channel ``n`` as the programming guide orders it; the voltage
+        limits go off before the load setting (the instrument refuses a load change while they
+        are on) and on again before amplitude and offset."""
         w = self.transport.write
         w(f"OUTP{n} OFF")
         w(f"SOUR{n}:DATA:VOL:CLE")
-        w("FORM:BORD SWAP")
-        self.transport.write_block(f"SOUR{n}:DATA:ARB:DAC {name},", data)
-        w(f"SOUR{n}:FUNC ARB")
-        w(f"SOUR{n}:FUNC:ARB {name}")
-        w(f"SOUR{n}:FUNC:ARB:SRAT {rate:.12g}")
-        w(f"OUTP{n}:LOAD INF")
-        w(f"SOUR{n}:VOLT:LIM:HIGH {peak_V:.6g}")
-        w(f"SOUR{n}:VOLT:LIM:LOW {-peak_V:.6g}")
+        w(f"FORM:BORD {req.byte_order}")
+        self.transport.write_block(f"SOUR{n}:DATA:ARB:DAC {req.arb_name},", data)
+        w(f"SOUR{n}:FUNC {req.function}")
+        w(f"SOUR{n}:FUNC:ARB {req.arb_name}")
+        w(f"SOUR{n}:FUNC:ARB:SRAT {req.sample_rate_Hz:.12g}")
+        w(f"SOUR{n}:VOLT:LIM:STAT OFF")
+        w(f"OUTP{n}:LOAD {req.load}")
+        w(f"SOUR{n}:VOLT:UNIT {req.amplitude_unit}")
+        w(f"SOUR{n}:VOLT:LIM:HIGH {req.limit_high_V:.6g}")
+        w(f"SOUR{n}:VOLT:LIM:LOW {req.limit_low_V:.6g}")
         w(f"SOUR{n}:VOLT:LIM:STAT ON")
-        w(f"SOUR{n}:VOLT:OFFS {config.offset_V:.6g}")
-        w(f"SOUR{n}:VOLT {config.amplitude_Vpp:.6g}")
-        w(f"SOUR{n}:BURS:MODE TRIG")
-        w(f"SOUR{n}:BURS:NCYC 1")
+        w(f"SOUR{n}:VOLT:OFFS {req.offset_V:.6g}")
+        w(f"SOUR{n}:VOLT {req.amplitude_Vpp:.6g}")
+        w(f"SOUR{n}:BURS:MODE {req.burst_mode}")
+        w(f"SOUR{n}:BURS:NCYC {req.burst_cycles}")
         w(f"SOUR{n}:BURS:STAT ON")
-        w(f"TRIG{n}:SOUR {_TRIGGER_SOURCE[config.trigger_source]}")
+        w(f"TRIG{n}:SOUR {req.trigger_source}")
         w(f"OUTP:TRIG:SOUR CH{n}")
-        w("OUTP:TRIG:SLOP POS")
+        w(f"OUTP:TRIG:SLOP {req.trigger_out_slope}")
         w("OUTP:TRIG ON")
 
     def output(self, channel: int, on: bool) -> None:
@@ -369,22 +397,20 @@ class KeysightGenerator:
 
     # --- provenance and safety --------------------------------------------------------------
     def snapshot(self) -> dict[str, Any]:
-        """Identity, limits and per-channel burst settings (JSON-serialisable, SI units)."""
+        """Identity, limits and per channel: the burst shape asked for, and every setting as
+        the channel reported it after configuration (``read_back``, SI units: Vpp, V, Sa/s,
+        ohm or ``"INF"``). JSON-serialisable."""
         chans: dict[str, Any] = {}
         for ch in self.channels:
             cfg = self._configs.get(ch)
+            held = self._readback.get(ch)
             entry: dict[str, Any] = {"output_on": self._outputs.get(ch, False)}
-            if cfg is not None:
+            if cfg is not None and held is not None:
                 entry.update(
                     f_center_Hz=cfg.shape.f_center_Hz,
                     cycles=cfg.shape.cycles,
                     width_s=cfg.shape.width_s,
-                    amplitude_Vpp=cfg.amplitude_Vpp,
-                    offset_V=cfg.offset_V,
-                    sample_rate_Hz=cfg.sample_rate_Hz,
-                    played_sample_rate_Hz=self._played_rate.get(ch),
-                    trigger_source=cfg.trigger_source,
-                    load="INF",
+                    read_back=held.as_json(),
                 )
             chans[str(ch)] = entry
         return {

@@ -61,6 +61,23 @@ class _Aborted(Exception):
     pass
 
 
+def _held_text(snapshot: dict[str, Any], channel: int) -> str:
+    """``", read back 1 Vpp, offset 0 V, 999889.5 Sa/s, load INF, trigger BUS"``: what the
+    generator's channel reported holding after configuration (its snapshot's ``read_back``),
+    for the run's log; empty when the generator reports none."""
+    held = snapshot.get("channels", {}).get(str(channel), {}).get("read_back")
+    if not isinstance(held, dict):
+        return ""
+    try:
+        return (
+            f", read back {held['amplitude_Vpp']:.6g} {held['amplitude_unit']}, offset "
+            f"{held['offset_V']:.6g} V, {held['sample_rate_Hz']:.10g} Sa/s, load "
+            f"{held['load_ohm']}, trigger {held['trigger_source']}"
+        )
+    except (KeyError, TypeError, ValueError):
+        return ""
+
+
 def _jsonable(obj: Any) -> Any:
     """A JSON-ready copy of a settings object (dataclasses, pydantic models, arrays)."""
     import dataclasses
@@ -685,7 +702,9 @@ class RunEngine:
         if errs:
             raise InstrumentError(f"generator reported: {'; '.join(errs)}")
         self._log(
-            "info", f"generator channel {ch}: {point.direction} burst {point.generator_Vpp:.4g} Vpp"
+            "info",
+            f"generator channel {ch}: {point.direction} burst {point.generator_Vpp:.4g} Vpp"
+            + _held_text(gen.snapshot(), ch),
         )
 
     def _point_data(self, point: Point, attempt: int) -> dict[str, Any]:

@@ -8,6 +8,22 @@ that fire on ``*TRG``), :attr:`responsive` (False: stops answering), :meth:`push
 following reply, as from an instrument that stalled), :meth:`clear` (device clear: the output
 queue, late replies included, is dropped; the error queue is kept, as IEEE 488.2 says).
 The arbitrary waveform of ``n`` points is played in ``n / SRAT`` s (point ``k`` at ``k / SRAT``).
+
+Queries answer as the 33500 Series Operating and Service Guide gives them ("Typical Return"):
+numbers in NR3 with 15 decimals (``+1.000000000000000E+00``; ``OUTPn:LOAD?`` answers
+``+9.9E+37`` for high Z), booleans ``1``/``0``, discrete settings as their upper-case short form
+(``ARB``, ``TRIG``, ``BUS``, ``POS``, ``VPP``), arb names as a quoted string (``"BIAFC1"``).
+From the guide's "Output Termination": the load is 1 ohm to 10 kohm or INF (default 50 ohm);
+changing it rescales the displayed amplitude and offset without an error (50 ohm -> INF
+doubles them); units become Vpp at high Z; and the load cannot be changed while the voltage
+limits are on (here: -221 "Settings conflict", the setting kept).
+
+``strict=True`` coerces instead of refusing, like the instrument: an amplitude or offset outside
+what the load allows (at 50 ohm 1 mVpp to 10 Vpp, |offset| + Vpp/2 <= 5 V; twice that at high
+Z) is clipped to the nearest allowed value and -222 "Data out of range" is queued; amplitude
+and offset are kept to :attr:`KeysightEmulator.volt_digits` significant digits and the arb
+sample rate to :attr:`KeysightEmulator.srat_digits`, silently. The digit counts are stand-ins
+for the instrument's resolution (the guide states no step), so a test can make them coarse.
 """
 
 from __future__ import annotations
@@ -25,6 +41,9 @@ __all__ = ["ChannelState", "KeysightEmulator", "scpi_short"]
 
 IDN = "Keysight Technologies,33522B,MY00000000,4.00-1.19-2.00-58-00"
 MAX_HIGHZ_VPP = 20.0
+MIN_HIGHZ_VPP = 2.0e-3
+#: series output impedance (ohm): the displayed voltage is the open-circuit one x R / (R + 50)
+OUTPUT_OHM = 50.0
 MAX_SRATE = 160.0e6
 QUEUE_LEN = 20
 _VOWELS = set("AEIOU")
@@ -55,6 +74,21 @@ def scpi_short(token: str) -> str:
     return t[:3] if t[3] in _VOWELS else t[:4]
 
 
+def _nr3(x: float) -> str:
+    """NR3 as the instrument writes it: ``+1.000000000000000E+00``."""
+    return f"{float(x):+.15E}"
+
+
+def _digits(x: float, digits: int) -> float:
+    """``x`` kept to ``digits`` significant digits."""
+    return float(f"{x:.{digits}g}")
+
+
+def _divider(load_ohm: float) -> float:
+    """Displayed / open-circuit voltage for a load setting: R / (R + 50), 1 at high Z."""
+    return 1.0 if math.isinf(load_ohm) else load_ohm / (load_ohm + OUTPUT_OHM)
+
+
 class ScpiError(Exception):
     def __init__(self, code: int, message: str) -> None:
         super().__init__(f"{code},{message}")
@@ -74,6 +108,7 @@ class ChannelState:
     offset_V: float = 0.0
     load_ohm: float = 50.0
     output_on: bool = False
+    amplitude_unit: str = "VPP"
     limit_high_V: float = 5.0
     limit_low_V: float = -5.0
     limit_on: bool = False
@@ -90,7 +125,12 @@ class ChannelState:
 class KeysightEmulator:
     """SCPI emulator; ``handle(message)`` returns the reply of a query, else None."""
 
-    def __init__(self, n_channels: int = 2) -> None:
+    def __init__(
+        self, n_channels: int = 2, strict: bool = False, volt_digits: int = 4, srat_digits: int = 9
+    ) -> None:
+        self.strict = strict
+        self.volt_digits = volt_digits
+        self.srat_digits = srat_digits
         self.responsive = True
         self.channels: dict[int, ChannelState] = {
             n: ChannelState() for n in range(1, n_channels + 1)
@@ -100,6 +140,7 @@ class KeysightEmulator:
         self.errors: deque[tuple[int, str]] = deque()
         self.trigger_out_source = 1
         self.trigger_out_on = False
+        self.trigger_out_slope = "POS"
         self.trigger_hooks: list[Callable[[tuple[int, ...]], None]] = []
         self.n_triggers = 0
         self.commands: list[str] = []
@@ -208,7 +249,9 @@ class KeysightEmulator:
                 hook(fired)
             return None
         if header == "*RST":
-            self.__init__(len(self.channels))  # type: ignore[misc]
+            self.__init__(  # type: ignore[misc]
+                len(self.channels), self.strict, self.volt_digits, self.srat_digits
+            )
             return None
         if header == "*CLS":
             self.errors.clear()
@@ -256,11 +299,11 @@ class KeysightEmulator:
             return None
         if key == "FUNC:ARB:SRAT":
             if query:
-                return f"{ch.sample_rate_Hz:+.9E}"
+                return _nr3(ch.sample_rate_Hz)
             x = self._number(arg)
             if not 1e-6 <= x <= MAX_SRATE:
                 raise ScpiError(-222, "Data out of range")
-            ch.sample_rate_Hz = x
+            ch.sample_rate_Hz = _digits(x, self.srat_digits) if self.strict else x
             return None
         if key == "OUTP":
             if query:
@@ -269,30 +312,36 @@ class KeysightEmulator:
             return None
         if key == "OUTP:LOAD":
             if query:
-                return "+9.9E+37" if math.isinf(ch.load_ohm) else f"{ch.load_ohm:+.6E}"
+                return "+9.9E+37" if math.isinf(ch.load_ohm) else _nr3(ch.load_ohm)
             v = arg.upper()
-            ch.load_ohm = math.inf if v in ("INF", "INFINITY") else self._number(arg)
-            if not (math.isinf(ch.load_ohm) or 1 <= ch.load_ohm <= 10e3):
+            load = math.inf if v in ("INF", "INFINITY") else self._number(arg)
+            if not (math.isinf(load) or 1 <= load <= 10e3):
                 raise ScpiError(-222, "Data out of range")
+            if ch.limit_on:
+                raise ScpiError(-221, "Settings conflict")
+            k = _divider(load) / _divider(ch.load_ohm)
+            ch.amplitude_Vpp, ch.offset_V, ch.load_ohm = ch.amplitude_Vpp * k, ch.offset_V * k, load
+            if math.isinf(load):
+                ch.amplitude_unit = "VPP"
+            return None
+        if key == "VOLT:UNIT":
+            if query:
+                return ch.amplitude_unit
+            v = arg.strip().upper()
+            if v not in ("VPP", "VRMS", "DBM"):
+                raise ScpiError(-224, "Illegal parameter value")
+            if v == "DBM" and math.isinf(ch.load_ohm):
+                raise ScpiError(-221, "Settings conflict")
+            ch.amplitude_unit = v
             return None
         if key in ("VOLT", "VOLT:OFFS"):
             if query:
-                return f"{ch.amplitude_Vpp if key == 'VOLT' else ch.offset_V:+.9E}"
-            x = self._number(arg)
-            amp = x if key == "VOLT" else ch.amplitude_Vpp
-            off = x if key == "VOLT:OFFS" else ch.offset_V
-            vmax = MAX_HIGHZ_VPP if math.isinf(ch.load_ohm) else MAX_HIGHZ_VPP / 2
-            if (key == "VOLT" and amp <= 0) or amp + 2 * abs(off) > vmax + 1e-9:
-                raise ScpiError(-222, "Data out of range")
-            if ch.limit_on and (
-                off + amp / 2 > ch.limit_high_V + 1e-9 or off - amp / 2 < ch.limit_low_V - 1e-9
-            ):
-                raise ScpiError(-221, "Settings conflict;amplitude exceeds voltage limits")
-            ch.amplitude_Vpp, ch.offset_V = amp, off
+                return _nr3(ch.amplitude_Vpp if key == "VOLT" else ch.offset_V)
+            self._volt(ch, key, self._number(arg))
             return None
         if key in ("VOLT:LIM:HIGH", "VOLT:LIM:LOW"):
             if query:
-                return f"{ch.limit_high_V if key.endswith('HIGH') else ch.limit_low_V:+.9E}"
+                return _nr3(ch.limit_high_V if key.endswith("HIGH") else ch.limit_low_V)
             x = self._number(arg)
             if abs(x) > MAX_HIGHZ_VPP / 2:
                 raise ScpiError(-222, "Data out of range")
@@ -316,7 +365,7 @@ class KeysightEmulator:
             return None
         if key == "BURS:NCYC":
             if query:
-                return f"{ch.burst_cycles:+.9E}"
+                return _nr3(ch.burst_cycles)
             x = self._number(arg)
             if x != int(x) or not 1 <= x <= 1e8:
                 raise ScpiError(-222, "Data out of range")
@@ -345,8 +394,11 @@ class KeysightEmulator:
             self.trigger_out_source = int(m.group(1))
             return None
         if key == "OUTP:TRIG:SLOP":
+            if query:
+                return self.trigger_out_slope
             if scpi_short(arg) not in ("POS", "NEG"):
                 raise ScpiError(-224, "Illegal parameter value")
+            self.trigger_out_slope = scpi_short(arg)
             return None
         if key == "OUTP:TRIG":
             if query:
@@ -354,6 +406,30 @@ class KeysightEmulator:
             self.trigger_out_on = self._bool(arg)
             return None
         raise ScpiError(-113, "Undefined header")
+
+    def _volt(self, ch: ChannelState, key: str, x: float) -> None:
+        """``VOLT`` (Vpp) or ``VOLT:OFFS`` (V) at the present load: refused out of range (-222,
+        value kept), or with ``strict`` clipped into range (-222 queued) and rounded."""
+        amp = x if key == "VOLT" else ch.amplitude_Vpp
+        off = x if key == "VOLT:OFFS" else ch.offset_V
+        k = _divider(ch.load_ohm)
+        vmax, vmin = MAX_HIGHZ_VPP * k, MIN_HIGHZ_VPP * k
+        inside = vmin - 1e-12 <= amp and amp + 2 * abs(off) <= vmax + 1e-9
+        if not inside and not self.strict:
+            raise ScpiError(-222, "Data out of range")
+        if not inside:
+            if key == "VOLT":
+                amp = min(max(amp, vmin), vmax - 2 * abs(off))
+            else:
+                off = math.copysign(min(abs(off), (vmax - amp) / 2), off)
+            self.push_error(-222, "Data out of range")
+        if self.strict:
+            amp, off = _digits(amp, self.volt_digits), _digits(off, self.volt_digits)
+        if ch.limit_on and (
+            off + amp / 2 > ch.limit_high_V + 1e-9 or off - amp / 2 < ch.limit_low_V - 1e-9
+        ):
+            raise ScpiError(-221, "Settings conflict;amplitude exceeds voltage limits")
+        ch.amplitude_Vpp, ch.offset_V = amp, off
 
     def _arb_dac(self, n: int, arg: str, block: bytes | None) -> None:
         name = arg.rstrip(",").strip().strip('"').upper()

@@ -22,6 +22,7 @@ def test_a_sim_run_file_records_what_reproduces_it(tmp_path: Path) -> None:
     with h5py.File(out, "r") as f:  # plain h5py, no SWMR, no biafc code
         a = dict(f.attrs)
         snap = json.loads(f["snapshot"].attrs["json"])
+        log = [m.decode() for m in f["log"]["message"][:]]
     assert a["protocol_yaml"] == pf.text and a["bench_yaml"] == bf.text
     assert a["git_commit"] == "unknown" or len(a["git_commit"]) == 40
     assert a["git_dirty"] in (-1, 0, 1)
@@ -34,6 +35,12 @@ def test_a_sim_run_file_records_what_reproduces_it(tmp_path: Path) -> None:
     assert rb["vibrometer"]["range"] == bf.bench.vibrometer.range
     assert rb["vibrometer"]["sensitivity_m_per_s_per_V"] > 0
     assert rb["digitiser"]["sample_rate_Hz"] == 200e3
+    # every burst as the generator reported holding it, read back after configuration
+    armed = [m for m in log if m.startswith("generator channel 1: ltr burst")]
+    assert len(armed) == 2, log
+    for line in armed:
+        assert ", read back " in line and " VPP, offset 0 V, " in line
+        assert " Sa/s, load INF, trigger BUS" in line
     model = snap["simulation_model"]
     assert model["seed"] == 3
     assert model["actuator"]["amplifier_gain_V_per_V"] == 20

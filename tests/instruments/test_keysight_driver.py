@@ -23,8 +23,39 @@ def played_rate(n_points: int, config: BurstConfig = CFG) -> float:
     return (n_points - 1) / config.shape.duration_s
 
 
-def srat_readback(ch: int, n_bytes: int) -> tuple[str, str]:
-    return (f"SOUR{ch}:FUNC:ARB:SRAT?", f"{played_rate(n_bytes // 2):+.9E}")
+def nr3(x: float) -> str:
+    """A number as the 33500 answers it ("Typical Return" +1.000000000000000E+00)."""
+    return f"{x:+.15E}"
+
+
+def readback_script(
+    ch: int, n_bytes: int, replies: dict[str, str] | None = None
+) -> list[tuple[str, str]]:
+    """The channel's answers to the driver's read-back queries, as the 33500 Series guide
+    gives them (``replies`` overrides some, keyed by the query without ``SOURn:``)."""
+    answers = {
+        "FUNC?": "ARB",
+        "FUNC:ARB?": f'"BIAFC{ch}"',
+        "FUNC:ARB:SRAT?": nr3(played_rate(n_bytes // 2)),
+        f"OUTP{ch}:LOAD?": "+9.9E+37",
+        "VOLT:UNIT?": "VPP",
+        "VOLT:LIM:HIGH?": nr3(5.0),
+        "VOLT:LIM:LOW?": nr3(-5.0),
+        "VOLT:LIM:STAT?": "1",
+        "VOLT:OFFS?": nr3(0.0),
+        "VOLT?": nr3(4.0),
+        "BURS:MODE?": "TRIG",
+        "BURS:NCYC?": nr3(1.0),
+        "BURS:STAT?": "1",
+        f"TRIG{ch}:SOUR?": "BUS",
+        "OUTP:TRIG:SOUR?": f"CH{ch}",
+        "OUTP:TRIG:SLOP?": "POS",
+        "OUTP:TRIG?": "1",
+        "FORM:BORD?": "SWAP",
+    }
+    answers.update(replies or {})
+    prefixed = ("OUTP", "TRIG", "FORM")
+    return [(q if q.startswith(prefixed) else f"SOUR{ch}:{q}", r) for q, r in answers.items()]
 
 
 def config_script(ch: int, n_bytes: int) -> list[tuple[str, str | BaseException | None]]:
@@ -38,7 +69,9 @@ def config_script(ch: int, n_bytes: int) -> list[tuple[str, str | BaseException 
         (f"SOUR{ch}:FUNC ARB", None),
         (f"SOUR{ch}:FUNC:ARB BIAFC{ch}", None),
         (f"SOUR{ch}:FUNC:ARB:SRAT {rate:.12g}", None),
+        (f"SOUR{ch}:VOLT:LIM:STAT OFF", None),
         (f"OUTP{ch}:LOAD INF", None),
+        (f"SOUR{ch}:VOLT:UNIT VPP", None),
         (f"SOUR{ch}:VOLT:LIM:HIGH 5", None),
         (f"SOUR{ch}:VOLT:LIM:LOW -5", None),
         (f"SOUR{ch}:VOLT:LIM:STAT ON", None),
@@ -57,7 +90,7 @@ def config_script(ch: int, n_bytes: int) -> list[tuple[str, str | BaseException 
 def test_configure_burst_exact_sequence_and_block_bytes() -> None:
     samples = burst_samples(CFG.shape, CFG.sample_rate_Hz)
     n_bytes = 2 * samples.size
-    t = ScriptedTransport([*config_script(2, n_bytes), NO_ERR, srat_readback(2, n_bytes)])
+    t = ScriptedTransport([*config_script(2, n_bytes), *readback_script(2, n_bytes), NO_ERR])
     gen = KeysightGenerator(t, LIMITS)
     gen.configure_burst(2, CFG)
     assert t.done
@@ -73,7 +106,7 @@ def test_configure_burst_exact_sequence_and_block_bytes() -> None:
 
 def test_output_trigger_and_opc() -> None:
     samples = burst_samples(CFG.shape, CFG.sample_rate_Hz)
-    script = [*config_script(1, 2 * samples.size), NO_ERR, srat_readback(1, 2 * samples.size)]
+    script = [*config_script(1, 2 * samples.size), *readback_script(1, 2 * samples.size), NO_ERR]
     script += [("OUTP1 ON", None), NO_ERR, ("OUTP:TRIG:SOUR CH1", None)]
     script += [("*TRG", None), ("*OPC?", "1")]
     t = ScriptedTransport(script)
@@ -130,7 +163,7 @@ def test_nan_waveform_refused_before_sending() -> None:
 
 def test_error_after_configuration_raises_and_leaves_outputs_off() -> None:
     samples = burst_samples(CFG.shape, CFG.sample_rate_Hz)
-    script = [*config_script(1, 2 * samples.size)]
+    script = [*config_script(1, 2 * samples.size), *readback_script(1, 2 * samples.size)]
     script += [("SYST:ERR?", '-222,"Data out of range"'), NO_ERR]
     script += [("OUTP1 OFF", None), ("OUTP2 OFF", None)]
     t = ScriptedTransport(script)
@@ -173,3 +206,62 @@ def test_limits_dataclass_validates() -> None:
     assert GeneratorLimits(
         max_piezo_V=40.0, amplifier_gain=20.0
     ).max_generator_peak_V == pytest.approx(2.0)
+
+
+def test_snapshot_records_what_the_channel_reports_not_the_request() -> None:
+    samples = burst_samples(CFG.shape, CFG.sample_rate_Hz)
+    n_bytes = 2 * samples.size
+    held = {"VOLT?": "+4.002000000000000E+00", "VOLT:OFFS?": "+5.000000000000000E-05"}
+    t = ScriptedTransport([*config_script(1, n_bytes), *readback_script(1, n_bytes, held), NO_ERR])
+    gen = KeysightGenerator(t, LIMITS)
+    gen.configure_burst(1, CFG)  # within 0.1 % + 0.1 mV: accepted
+    assert t.done
+    rb = gen.snapshot()["channels"]["1"]["read_back"]
+    assert rb["amplitude_Vpp"] == 4.002 and rb["offset_V"] == 5e-5  # not the 4 Vpp, 0 V asked
+    assert rb["sample_rate_Hz"] == pytest.approx(played_rate(samples.size), rel=1e-15)
+    assert rb["load_ohm"] == "INF" and rb["amplitude_unit"] == "VPP"
+    assert (rb["arb_name"], rb["burst_cycles"], rb["trigger_source"]) == ("BIAFC1", 1, "BUS")
+    assert rb["burst_on"] is True and rb["limit_on"] is True and rb["limit_high_V"] == 5.0
+
+
+@pytest.mark.parametrize(
+    ("query", "reply", "message"),
+    [
+        ("VOLT?", "+1.000000000000000E+01", "amplitude: requested 4 Vpp, read back 10 Vpp"),
+        ("VOLT:OFFS?", "+2.000000000000000E-03", "offset: requested 0 V, read back 0.002 V"),
+        ("BURS:NCYC?", "+2.000000000000000E+00", "burst count: requested 1 cycles, read back 2"),
+        ("TRIG1:SOUR?", "IMM", "trigger source: requested BUS, read back IMM"),
+        ("OUTP1:LOAD?", "+5.000000000000000E+01", "output load: requested INF ohm, read back 50"),
+        ("FUNC:ARB?", '"EXP_RISE"', "arb waveform: requested BIAFC1, read back EXP_RISE"),
+        ("BURS:STAT?", "0", "burst state: requested ON, read back OFF"),
+        ("VOLT:UNIT?", "VRMS", "amplitude unit: requested VPP, read back VRMS"),
+    ],
+)
+def test_a_coerced_setting_is_one_line_naming_setting_request_and_read_back(
+    query: str, reply: str, message: str
+) -> None:
+    samples = burst_samples(CFG.shape, CFG.sample_rate_Hz)
+    n_bytes = 2 * samples.size
+    script = [*config_script(1, n_bytes), *readback_script(1, n_bytes, {query: reply}), NO_ERR]
+    script += [("OUTP1 OFF", None), ("OUTP2 OFF", None)]
+    t = ScriptedTransport(script, name="generator (TCPIP::x::INSTR)")
+    gen = KeysightGenerator(t, LIMITS)
+    with pytest.raises(ReplyError) as info:
+        gen.configure_burst(1, CFG)
+    text = str(info.value)
+    assert text.startswith("generator (TCPIP::x::INSTR): channel 1 ") and "\n" not in text
+    assert message in text and "tolerance" in text
+    assert t.done  # outputs switched off
+    assert gen.held(1) is None and "read_back" not in gen.snapshot()["channels"]["1"]
+    with pytest.raises(Exception, match="configure a burst"):
+        gen.output(1, True)
+
+
+def test_an_unreadable_read_back_reply_is_a_reply_error_naming_the_query() -> None:
+    samples = burst_samples(CFG.shape, CFG.sample_rate_Hz)
+    n_bytes = 2 * samples.size
+    script = [*config_script(1, n_bytes), *readback_script(1, n_bytes, {"VOLT?": "garbage"})]
+    t = ScriptedTransport([*script[: len(script) - 8], ("OUTP1 OFF", None), ("OUTP2 OFF", None)])
+    with pytest.raises(ReplyError, match=r"amplitude: unreadable SOUR1:VOLT\? reply 'garbage'"):
+        KeysightGenerator(t, LIMITS).configure_burst(1, CFG)
+    assert t.done

@@ -1,0 +1,96 @@
+"""The generator's settings read back from the emulated 33500B, the emulator answering as the
+33500 Series Operating and Service Guide says, and a strict emulator that coerces values: the
+driver reports what the channel holds, or a one-line mismatch, never the request."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from instruments.burst import Burst
+from instruments.errors import ReplyError
+from instruments.interfaces import BurstConfig
+from instruments.keysight import GeneratorLimits, KeysightGenerator
+from sim_backend.emulators import KeysightEmulator, SimClock, SimTransport
+
+LIMITS = GeneratorLimits(max_piezo_V=150.0, amplifier_gain=20.0, max_amplitude_Vpp=10.0)
+
+
+def on(emu: KeysightEmulator) -> KeysightGenerator:
+    return KeysightGenerator(SimTransport(emu, "generator (simulated)", 2.0, SimClock()), LIMITS)
+
+
+def burst(amplitude_Vpp: float, **kw: float) -> BurstConfig:
+    return BurstConfig(Burst(8920.0), amplitude_Vpp=amplitude_Vpp, **kw)  # type: ignore[arg-type]
+
+
+def test_emulator_answers_queries_as_the_guide_gives_them() -> None:
+    emu = KeysightEmulator()
+    t = on(emu).transport
+    q, w = t.query, t.write
+    assert q("OUTP1:LOAD?") == "+5.000000000000000E+01"  # default 50 ohm
+    w("SOUR1:VOLT 4")
+    w("OUTP1:LOAD INF")  # 50 ohm -> high Z doubles the displayed amplitude, no error
+    assert q("SOUR1:VOLT?") == "+8.000000000000000E+00"
+    assert q("OUTP1:LOAD?") == "+9.9E+37" and q("SOUR1:VOLT:UNIT?") == "VPP"
+    w("SOUR1:BURS:NCYC 3")
+    assert q("SOUR1:BURS:NCYC?") == "+3.000000000000000E+00"
+    assert q("SOUR1:BURS:STAT?") == "0" and q("SOUR1:BURS:MODE?") == "TRIG"
+    w("OUTP:TRIG:SLOP NEG")
+    assert q("OUTP:TRIG:SLOP?") == "NEG" and q("TRIG1:SOUR?") == "IMM"
+    w("SOUR1:VOLT:LIM:STAT ON")
+    w("OUTP1:LOAD 50")  # not while the limits are on
+    assert q("OUTP1:LOAD?") == "+9.9E+37"
+    assert q("SYST:ERR?") == '-221,"Settings conflict"'
+
+
+def test_read_back_is_what_the_snapshot_records() -> None:
+    emu = KeysightEmulator()
+    gen = on(emu)
+    gen.configure_burst(2, burst(4.0, offset_V=0.1))
+    rb = gen.snapshot()["channels"]["2"]["read_back"]
+    ch = emu.channels[2]
+    assert rb["amplitude_Vpp"] == ch.amplitude_Vpp == 4.0 and rb["offset_V"] == 0.1
+    assert rb["sample_rate_Hz"] == ch.sample_rate_Hz and rb["load_ohm"] == "INF"
+    assert rb["trigger_out_source"] == "CH2" and rb["burst_cycles"] == 1
+
+
+def test_strict_emulator_rounding_is_recorded_not_the_request() -> None:
+    emu = KeysightEmulator(strict=True)  # amplitude kept to 4 digits
+    gen = on(emu)
+    gen.configure_burst(1, burst(1.23456))
+    assert emu.channels[1].amplitude_Vpp == 1.235
+    assert gen.snapshot()["channels"]["1"]["read_back"]["amplitude_Vpp"] == 1.235
+
+
+def test_strict_emulator_clipping_the_amplitude_is_reported_not_recorded() -> None:
+    emu = KeysightEmulator(strict=True)
+    gen = on(emu)
+    with pytest.raises(ReplyError) as info:  # 0.5 mVpp is below 2 mVpp at high Z: clipped
+        gen.configure_burst(1, burst(0.0005))
+    assert str(info.value) == (
+        "generator (simulated): channel 1 amplitude: requested 0.0005 Vpp, read back 0.002 Vpp "
+        "(tolerance 0.1 % + 0.1 mV); instrument errors: -222,Data out of range"
+    )
+    assert not any(c.output_on for c in emu.channels.values())
+    assert "read_back" not in gen.snapshot()["channels"]["1"]
+
+
+def test_strict_emulator_quantising_the_sample_rate_is_reported() -> None:
+    emu = KeysightEmulator(strict=True, srat_digits=4)  # silently, no SCPI error
+    gen = on(emu)
+    with pytest.raises(ReplyError, match=r"channel 1 arb sample rate: requested 99988\d\.\d+ Sa/s, "
+                       r"read back 999900 Sa/s \(tolerance 1e-6 relative\)$"):  # fmt: skip
+        gen.configure_burst(1, burst(1.0))
+    assert gen.held(1) is None
+
+
+def test_a_channel_configured_twice_turns_its_limits_off_before_the_load() -> None:
+    emu = KeysightEmulator()  # refuses a load change while the voltage limits are on
+    gen = on(emu)
+    gen.configure_burst(1, burst(1.0))
+    gen.configure_burst(1, burst(2.0))  # the limits are on from the first one
+    held = gen.held(1)
+    assert held is not None and held.amplitude_Vpp == 2.0 and math.isinf(held.load_ohm)
+    assert held.limit_on and gen.errors() == []
