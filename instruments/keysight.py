@@ -75,6 +75,10 @@ class GeneratorLimits:
         Arbitrary-waveform sample-rate ceiling (Sa/s).
     max_points:
         Largest arbitrary waveform (samples).
+    min_amplitude_Vpp:
+        Smallest amplitude the generator plays (Vpp): 1 mVpp into 50 ohm, 2 mVpp at the high
+        impedance this driver sets (33500B/33600A data sheets); below it the instrument clips
+        and queues -222.
     """
 
     max_piezo_V: float
@@ -82,9 +86,11 @@ class GeneratorLimits:
     max_amplitude_Vpp: float = 20.0
     max_sample_rate_Hz: float = 160.0e6
     max_points: int = 1_000_000
+    min_amplitude_Vpp: float = 2.0e-3
 
     def __post_init__(self) -> None:
-        for name in ("max_piezo_V", "amplifier_gain", "max_amplitude_Vpp", "max_sample_rate_Hz"):
+        for name in ("max_piezo_V", "amplifier_gain", "max_amplitude_Vpp", "max_sample_rate_Hz",
+                     "min_amplitude_Vpp"):  # fmt: skip
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise LimitError(f"generator limits: {name} must be > 0, got {value!r}")
@@ -98,6 +104,11 @@ class GeneratorLimits:
 
     def check(self, config: BurstConfig) -> None:
         """Raise :class:`LimitError` (numbers in the message) if ``config`` breaks a limit."""
+        if config.amplitude_Vpp < self.min_amplitude_Vpp:
+            raise LimitError(
+                f"generator amplitude {config.amplitude_Vpp:g} Vpp is below the generator "
+                f"minimum {self.min_amplitude_Vpp:g} Vpp at high-Z load"
+            )
         if config.amplitude_Vpp + 2 * abs(config.offset_V) > self.max_amplitude_Vpp:
             raise LimitError(
                 f"generator amplitude {config.amplitude_Vpp:g} Vpp with offset "

@@ -344,8 +344,13 @@ class BenchSpec(_Model):
 
     def amplitude_limit_error(self, vpp: float) -> str | None:
         """Why ``vpp`` (generator Vpp) is not allowed on this bench, or ``None``."""
+        from instruments.keysight import GeneratorLimits
+
         if not math.isfinite(vpp) or vpp <= 0:
             return f"{vpp!r} Vpp is not a positive amplitude"
+        vpp_min = GeneratorLimits.min_amplitude_Vpp  # the driver's, the class default
+        if vpp < vpp_min * (1 - 1e-12):
+            return f"{vpp:.4g} Vpp is below the generator minimum {vpp_min:.4g} Vpp"
         if vpp > self.generator.max_amplitude * (1 + 1e-12):
             return (
                 f"{vpp:.4g} Vpp is above the generator limit {self.generator.max_amplitude:.4g} Vpp"

@@ -160,19 +160,24 @@ def _check_amplitudes(pf: ProtocolFile, bf: BenchFile, vpp: NDArray[np.float64])
     written = pf.protocol.amplitudes
     texts = [written.start, written.stop] if not isinstance(written, list) else written
     notation = amplitude_notation(texts[0])
+
+    def said(vpp_: float) -> str:  # a generator amplitude in the protocol's own unit
+        if notation == "m":
+            return format_quantity(vpp_ / (2.0 * bench.generator_V_per_m), "length")
+        return f"{vpp_ / 2:.4g} Vpk" if notation == "Vpk" else f"{vpp_:.4g} Vpp"
+
+    min_vpp = _generator_limits(bf).min_amplitude_Vpp
     for i, v in enumerate(vpp):
+        if v < min_vpp * (1 - 1e-12):
+            raise pf.error(
+                ("amplitudes",),
+                f"amplitude {i + 1} ({said(v)}) is below {said(min_vpp)}, the smallest this "
+                f"bench plays: it needs {v:.4g} Vpp from the generator, below the generator's "
+                f"minimum {min_vpp:.4g} Vpp at high impedance",
+            )
         if v <= max_vpp * (1 + 1e-12):
             continue
-        if notation == "m":
-            per_m = 2.0 * bench.generator_V_per_m  # Vpp per metre of peak displacement
-            shown, limit = (
-                format_quantity(v / per_m, "length"),
-                format_quantity(max_vpp / per_m, "length"),
-            )
-        elif notation == "Vpk":
-            shown, limit = f"{v / 2:.4g} Vpk", f"{max_vpp / 2:.4g} Vpk"
-        else:
-            shown, limit = f"{v:.4g} Vpp", f"{max_vpp:.4g} Vpp"
+        shown, limit = said(v), said(max_vpp)
         if gen_max <= piezo_vpp:
             why = (
                 f"it needs {v:.4g} Vpp from the generator, above generator.max_amplitude "

@@ -272,6 +272,9 @@ CASES: tuple[Case, ...] = (
        ("proto.yaml", "6 Vpk", "5 Vpk", "generator.max_amplitude")),
     _p("amplitude_um_over", "30 um on a bench that reaches 5 um", "[0.5 um, 3 um]",
        "[0.5 um, 30 um]", ("proto.yaml", "30 um", "5 um")),
+    _p("amplitude_below_minimum", "1 mVpp: below the generator's 2 mVpp at high impedance",
+       "[0.5 um, 3 um]", "[1 mVpp, 1 Vpp]",
+       ("proto.yaml", "amplitudes", "0.001 Vpp", "minimum 0.002 Vpp")),
     # -- counts, durations and the memory a protocol asks for -------------------------------
     _p("cylinders_bool", "cylinders: [true]", "cylinders: [1, 8, 16]", "cylinders: [true]",
        ("proto.yaml", "cylinders")),

@@ -120,6 +120,33 @@ def test_amplitude_above_the_piezo_limit(tmp_path: Path) -> None:
     assert "at the piezo" in (low_piezo.bench.amplitude_limit_error(9.0) or "")
 
 
+def test_amplitude_below_the_generator_minimum_is_refused_up_front(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The 33500B plays no less than 2 mVpp at high impedance (it clips and queues -222): a
+    protocol asking for less is refused at request time (exit 2), in the protocol's own unit,
+    not failed at run time by the generator's read-back."""
+    from daq.cli import run_protocol as rp
+    from instruments.burst import Burst
+    from instruments.errors import LimitError
+    from instruments.interfaces import BurstConfig
+    from instruments.keysight import GeneratorLimits
+
+    proto = tmp_path / "p.yaml"
+    proto.write_text(GOOD.replace("[1 um, 2 um]", "[1 um, 0.5 nm]"))
+    code = rp.main([str(proto), "--out", str(tmp_path / "o.h5")])
+    err = capsys.readouterr().err.strip()
+    assert code == 2
+    assert f"{proto}:5: amplitudes: amplitude 2 (500 pm) is below 1 nm, the smallest" in err
+    assert "below the generator's minimum 0.002 Vpp at high impedance" in err
+    assert not (tmp_path / "o.h5").exists()
+    assert "below the generator minimum" in (load_bench().bench.amplitude_limit_error(1e-3) or "")
+    with pytest.raises(LimitError, match=r"below the generator minimum 0\.002 Vpp"):
+        GeneratorLimits(max_piezo_V=150.0, amplifier_gain=20.0).check(
+            BurstConfig(Burst(8.92e3, 5.0), amplitude_Vpp=1e-3)
+        )
+
+
 def test_cylinder_not_on_the_bench(tmp_path: Path) -> None:
     assert ":6: cylinders: cylinder 32" in _err(GOOD.replace("[1, 31]", "[1, 32]"), tmp_path)
 
