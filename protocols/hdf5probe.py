@@ -6,8 +6,11 @@ exponential back-off for minutes (the first kilobyte of a run file hung ``biafc 
 refuses a truncated file only outside SWMR. :func:`probe_hdf5` reads the superblock (at most
 a few hundred bytes) and refuses, in one line naming the file, what cannot be a whole HDF5
 file: a folder, an empty file, one without the HDF5 signature, one shorter than the end-of-file
-address its superblock names. A run file being written with SWMR keeps that address equal to
-its size at every flush, so a live file passes.
+address its superblock names, one whose superblock (version 2 or later, as run files are
+written) fails its checksum. A run file being written with SWMR keeps that address equal to
+its size at every flush, so a live file passes; a superblock read while its writer rewrites it
+is read again for :data:`TORN_GRACE_S` before it is called damaged. (Damage past the superblock
+is found by HDF5 itself: :mod:`protocols.swmr_read` bounds its retry under SWMR.)
 """
 
 from __future__ import annotations
@@ -18,12 +21,17 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from protocols.recover import lookup3
+
 __all__ = ["HDF5Header", "HDF5ProbeError", "probe_hdf5"]
 
 SIGNATURE = b"\x89HDF\r\n\x1a\n"
 #: a file shorter than its stated end while a writer holds it is looked at again for this long
 #: (s) before it is called truncated
 LIVE_GRACE_S = 0.5
+#: a superblock failing its checksum is read again for this long (s): a writer may have been
+#: rewriting it (its end-of-file address changes at every flush)
+TORN_GRACE_S = 0.2
 
 
 class HDF5ProbeError(ValueError):
@@ -82,12 +90,26 @@ def _stated_end(head: bytes) -> tuple[int, int] | None:
     return int(end), int(flags)
 
 
-def _look(p: Path) -> tuple[int, int | None, int]:
-    """``(size, stated end or None, flags)``."""
+def _checksum_fails(head: bytes) -> tuple[int, int] | None:
+    """``(first, last byte)`` of a version 2+ superblock at the start of ``head`` whose stored
+    checksum (lookup3 of the bytes before it) does not match; ``None`` when it matches or the
+    superblock has no checksum (versions 0 and 1) or cannot be read."""
+    if len(head) < 12 or head[8] < 2 or head[9] not in (2, 4, 8):
+        return None
+    n = 12 + 4 * head[9]
+    if len(head) < n + 4:
+        return None
+    if lookup3(head[:n]) == struct.unpack_from("<I", head, n)[0]:
+        return None
+    return 0, n + 3
+
+
+def _look(p: Path) -> tuple[int, int | None, int, tuple[int, int] | None]:
+    """``(size, stated end or None, flags, bytes of a superblock failing its checksum)``."""
     with p.open("rb") as f:
         size = os.fstat(f.fileno()).st_size
         if size == 0:
-            return 0, None, 0
+            return 0, None, 0, None
         offset = _signature_offset(f, size)
         if offset is None:
             raise HDF5ProbeError(
@@ -95,10 +117,14 @@ def _look(p: Path) -> tuple[int, int | None, int]:
                 "file written by run_protocol or biafc simulate"
             )
         f.seek(offset)
-        stated = _stated_end(f.read(96))
+        head = f.read(96)
+    bad = _checksum_fails(head)
+    if bad is not None:
+        return size, None, 0, (bad[0] + offset, bad[1] + offset)
+    stated = _stated_end(head)
     if stated is None:
-        return size, None, 0
-    return size, stated[0] + offset, stated[1]
+        return size, None, 0, None
+    return size, stated[0] + offset, stated[1], None
 
 
 def probe_hdf5(path: str | Path) -> HDF5Header:
@@ -111,15 +137,22 @@ def probe_hdf5(path: str | Path) -> HDF5Header:
     if not p.exists():
         raise HDF5ProbeError(f"{p} does not exist")
     try:
-        size, end, flags = _look(p)
-        deadline = time.monotonic() + LIVE_GRACE_S
-        while end is not None and size < end and flags and time.monotonic() < deadline:
-            time.sleep(0.05)
-            size, end, flags = _look(p)
+        t0 = time.monotonic()
+        size, end, flags, bad = _look(p)
+        while (bad is not None and time.monotonic() < t0 + TORN_GRACE_S) or (
+            end is not None and size < end and flags and time.monotonic() < t0 + LIVE_GRACE_S
+        ):
+            time.sleep(0.02)
+            size, end, flags, bad = _look(p)
     except OSError as exc:
         raise HDF5ProbeError(f"{p}: cannot read ({exc.strerror or exc})") from None
     if size == 0:
         raise HDF5ProbeError(f"{p}: an empty file (0 bytes), not a run file")
+    if bad is not None:
+        raise HDF5ProbeError(
+            f"{p}: damaged: its HDF5 superblock (bytes {bad[0]}-{bad[1]}) fails its checksum, "
+            "so where its objects lie is unknown; use an undamaged copy"
+        )
     if end is not None and size < end:
         raise HDF5ProbeError(
             f"{p}: truncated: {size} of the {end} bytes its HDF5 header names (an incomplete "

@@ -65,6 +65,7 @@ from numpy.typing import NDArray
 
 from protocols.hdf5probe import HDF5ProbeError, probe_hdf5
 from protocols.recover import ClearedView, has_consistency_flags
+from protocols.swmr_read import open_swmr
 
 __all__ = [
     "DIRECTIONS",
@@ -434,9 +435,10 @@ def open_for_reading(path: str | Path) -> Iterator[h5py.File]:
     empty, no signature, truncated) is a :class:`RunFileError` (one line) before h5py sees it.
 
     SWMR is used only for a file a writer holds (consistency flags set): HDF5's SWMR reader
-    retries a metadata read that fails its checksum for minutes (right while a writer flushes,
-    but a hang on a damaged or truncated file), while a plain read fails at once. A closed file
-    is read without HDF5's file lock, so a reader never stops a writer from resuming it."""
+    retries a metadata read that fails its checksum (right while a writer flushes), by default
+    for ever on a damaged file, while a plain read fails at once; :func:`open_swmr` bounds the
+    retry to about 0.3 s. A closed file is read without HDF5's file lock, so a reader never
+    stops a writer from resuming it."""
     try:
         header = probe_hdf5(path)
     except HDF5ProbeError as exc:
@@ -446,7 +448,7 @@ def open_for_reading(path: str | Path) -> Iterator[h5py.File]:
             yield g
         return
     try:
-        f = h5py.File(path, "r", swmr=True)
+        f = open_swmr(path)
     except OSError:
         if not Path(path).is_file() or not has_consistency_flags(path):
             raise

@@ -20,7 +20,6 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, Literal
 
-import h5py
 import numpy as np
 
 from daq.store.recover import clear_consistency_flags
@@ -167,7 +166,9 @@ def create_run(
 
 def stored_seed(path: Path) -> int | None:
     """The seed a run file was started with (``None`` when not recorded)."""
-    with h5py.File(path, "r", swmr=True) as f:
+    from protocols.runfile import open_for_reading
+
+    with open_for_reading(path) as f:
         v = f.attrs.get("seed")
     return None if v is None else int(v)
 
@@ -239,8 +240,11 @@ def check_resume(
                     continue
                 g = f["scan"][d]
                 scans[d] = (g["amplitudes"][...], g["cylinders"][...], g["time"].shape[0])
-    except (OSError, RunFileError, KeyError, ValueError, TypeError) as exc:
+    except RunFileError as exc:  # names the file
         raise StoreError(f"--resume: {str(exc).splitlines()[0]}") from None
+    except (OSError, KeyError, ValueError, TypeError) as exc:  # h5py's, inside the file
+        why = (str(exc).strip("'\"").splitlines() or [type(exc).__name__])[0]
+        raise StoreError(f"--resume: {path}: damaged HDF5 file, cannot be read ({why})") from None
     text = {"protocol_yaml": protocol_yaml, "bench_yaml": bench_yaml}
     if (status.decode() if isinstance(status, bytes) else str(status)) == "complete":
         raise StoreError(_complete(path))

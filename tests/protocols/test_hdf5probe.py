@@ -4,6 +4,7 @@ minutes); a file being written still reads, point by point."""
 
 from __future__ import annotations
 
+import threading
 import time
 from pathlib import Path
 
@@ -80,6 +81,28 @@ def test_damaged_metadata_is_refused_at_once(tmp_path: Path) -> None:
     with pytest.raises(RunFileError, match=r"run\.h5: damaged HDF5 file"):
         read_run(path)
     assert time.perf_counter() - t0 < 1.0
+
+
+def test_a_superblock_failing_its_checksum_is_refused_and_a_torn_read_is_read_again(
+    tmp_path: Path,
+) -> None:
+    path = tmp_path / "run.h5"
+    _writer(path).close("complete")
+    good = path.read_bytes()
+    bad = bytearray(good)
+    bad[28:32] = b"\0\0\0\0"  # the end-of-file address of the version 3 superblock
+    path.write_bytes(bytes(bad))
+    with pytest.raises(
+        HDF5ProbeError, match=r"run\.h5: damaged: its HDF5 superblock \(bytes 0-47\)"
+    ):
+        probe_hdf5(path)
+    # read while its writer rewrites it: right again within the grace, so it passes
+    fixer = threading.Timer(0.05, lambda: path.write_bytes(good))
+    fixer.start()
+    try:
+        assert probe_hdf5(path).end == len(good)
+    finally:
+        fixer.join()
 
 
 @pytest.mark.parametrize(
