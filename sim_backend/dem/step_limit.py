@@ -8,7 +8,7 @@ constant matrix ``P(h)`` acting on the modal state ``(q, p)`` of the chain ([2D,
 The step is stable when the spectral radius ``rho(P(h)) <= 1`` (the map is symplectic: stable
 eigenvalues lie on the unit circle; an unstable one grows by ``rho`` per step).
 
-How it is computed, in about 0.4 ms per step and overlap on the default chain (D = 124), the
+How it is computed, in about 0.3 ms per step and overlap on the default chain (D = 124), the
 overlaps of a scan together: a kick acts only through the primary masses and couples a cylinder
 to its neighbours only, so the map's position blocks are built by a compiled kernel on the band
 that a column can reach (:mod:`sim_backend.dem.step_map`, all overlaps in one call; the numpy
@@ -21,8 +21,9 @@ symmetric, and when it is positive definite (small steps), ``A B`` is symmetric 
 ``L^-1 A L`` (``B = L L^T``) is a symmetric matrix with the same ``c``: real, found by a symmetric
 solver, and the step is stable exactly when they all lie in [-1, 1], i.e. when ``B - A B`` and
 ``B + A B`` are positive definite: two Cholesky factorisations (LAPACK ``dpotrf``) per overlap,
-the eigenvalues only when one fails. (The dense 2D x 2D eigenvalues agree to round-off:
-``tests/dem/test_setup_cost.py``.)
+the eigenvalues only when one fails. The blocks, ``A B`` and both factorisations of every overlap
+of a scan are one compiled call (:func:`sim_backend.dem.step_map.stability_codes`: 2.2 ms for 8
+overlaps). (The dense 2D x 2D eigenvalues agree to round-off: ``tests/dem/test_setup_cost.py``.)
 
 The largest stable step ``h_max`` is the end of the small-step regime: the smallest ``h`` at which
 the step is unstable (``rho(P(h)) > 1 + tol``) or ``B`` stops being positive definite, found by a
@@ -345,31 +346,25 @@ def _window_stable_many(
 ) -> list[bool]:
     """Whether ``rho <= 1 + STABILITY_TOL`` on one window, for each of M contact stiffnesses
     (N/m), by factorisations only where it can: the ``c`` lie in [-C, C] exactly when ``C B - A B``
-    and ``C B + A B`` are positive definite (two Cholesky factorisations, LAPACK's ``dpotrf``:
-    its ``info`` says, no exception), which also makes ``B = (C B - A B + C B + A B) / 2C``
-    positive definite, the premise of the equivalence; anything else (a factorisation that
-    fails) is decided by the eigenvalues. ``small_step``: also require ``B`` positive definite
-    (the small-step regime of :func:`largest_stable_step`)."""
+    and ``C B + A B`` are positive definite (two Cholesky factorisations, LAPACK's ``dpotrf``),
+    which also makes ``B = (C B - A B + C B + A B) / 2C`` positive definite, the premise of the
+    equivalence; anything else (a factorisation that fails) is decided by the eigenvalues. The
+    blocks and the factorisations of all M stiffnesses are one compiled call
+    (:func:`sim_backend.dem.step_map.stability_codes`). ``small_step``: also require ``B``
+    positive definite (the small-step regime of :func:`largest_stable_step`)."""
     if not _palindromic(integrator):
         return [_window_radius(win, integrator, h, k) <= 1.0 + STABILITY_TOL for k in stiffness]
-    from scipy.linalg.lapack import dpotrf
+    from sim_backend.dem.step_map import STABLE, UNDECIDED, stability_codes
 
-    A, Bs = _position_blocks(win, integrator, h, stiffness, symmetric_b=True)
-    AB = np.matmul(A, Bs)  # symmetric to round-off; dpotrf reads one triangle
-    out = []
-    for o in range(stiffness.size):
-        cb = _C_TOL * Bs[o]
-        ok = (
-            dpotrf(np.subtract(cb, AB[o]).T, lower=1, clean=0, overwrite_a=1)[1] == 0
-            and dpotrf(np.add(cb, AB[o], out=cb).T, lower=1, clean=0, overwrite_a=1)[1] == 0
-        )
-        if not ok and small_step:
-            ok = dpotrf(Bs[o].T, lower=1, clean=0, overwrite_a=0)[1] != 0
-            if ok:  # B is not positive definite: past the small-step regime
-                out.append(False)
-                continue
-        out.append(ok or _radius_from_blocks(A[o], Bs[o]) <= 1.0 + STABILITY_TOL)
-    return out
+    coef, idx, kick = _stages(win, integrator, h)
+    codes, A, Bs = stability_codes(
+        win.phi, coef, idx, kick, stiffness, win.left, win.right, _C_TOL, small_step
+    )
+    return [
+        bool(code == STABLE)
+        or (code == UNDECIDED and _radius_from_blocks(A[o], Bs[o]) <= 1.0 + STABILITY_TOL)
+        for o, code in enumerate(codes.tolist())
+    ]
 
 
 def _stable_many(
