@@ -24,7 +24,6 @@ by hand) is waited for :data:`UNREADABLE_GRACE_S` and then taken over the same w
 
 from __future__ import annotations
 
-import fcntl
 import json
 import os
 import socket
@@ -32,6 +31,11 @@ import sys
 import time
 from pathlib import Path
 from typing import Any
+
+try:
+    import fcntl
+except ImportError:  # not on Windows: a takeover there is checked without the flock
+    fcntl = None  # type: ignore[assignment]
 
 __all__ = ["FileInUse", "RunFileLock", "in_use_by", "lock_path", "read_lock"]
 
@@ -194,17 +198,24 @@ class RunFileLock:
         other then finds the name gone or pointing to the winner's lock). Returns the note
         to log, or ``None`` when nothing was removed (look again)."""
         try:
-            fd = os.open(self.lock, os.O_RDONLY)
+            try:  # writable where it can be: NFS emulates flock with locks that need it
+                fd = os.open(self.lock, os.O_RDWR)
+            except PermissionError:
+                fd = os.open(self.lock, os.O_RDONLY)
         except FileNotFoundError:
             return None
         try:
-            fcntl.flock(fd, fcntl.LOCK_EX)
+            if fcntl is not None:
+                try:
+                    fcntl.flock(fd, fcntl.LOCK_EX)
+                except OSError:  # a file system without flock: checked below, unguarded
+                    pass
             try:
                 if os.stat(self.lock).st_ino != os.fstat(fd).st_ino:
                     return None  # removed and published again meanwhile
             except FileNotFoundError:
                 return None
-            raw = os.pread(fd, 1 << 16, 0)
+            raw = os.read(fd, 1 << 16)
             try:
                 other: dict[str, Any] | None = dict(json.loads(raw))
             except (ValueError, TypeError):
