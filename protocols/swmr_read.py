@@ -26,6 +26,13 @@ from typing import Any
 
 import h5py
 
+try:  # h5py's lock around every HDF5 call (the library is not built thread-safe)
+    from h5py._objects import phil as _hdf5_lock
+except ImportError:  # pragma: no cover - an h5py without it
+    import threading
+
+    _hdf5_lock = threading.RLock()
+
 __all__ = ["METADATA_READ_ATTEMPTS", "open_swmr", "retry_bound_available"]
 
 #: tries of a metadata read that fails its checksum: the back-off sleeps sum to about
@@ -59,9 +66,14 @@ def _loaded_hdf5_paths() -> list[str]:
     return paths
 
 
-@cache
 def _set_attempts() -> Any:
     """``H5Pset_metadata_read_attempts`` of the HDF5 library h5py uses, or ``None``."""
+    with _hdf5_lock:  # no other thread in HDF5 meanwhile (ctypes releases the GIL)
+        return _find_set_attempts()
+
+
+@cache
+def _find_set_attempts() -> Any:
     h5py.h5p.create(h5py.h5p.FILE_ACCESS)  # the library is loaded and initialised
     want = h5py.version.hdf5_version_tuple[:3]
     for path in _loaded_hdf5_paths():
@@ -99,9 +111,12 @@ def open_swmr(path: str | Path) -> h5py.File:
     fapl = h5py.h5p.create(h5py.h5p.FILE_ACCESS)
     fapl.set_libver_bounds(h5py.h5f.LIBVER_EARLIEST, h5py.h5f.LIBVER_LATEST)
     fn = _set_attempts()
-    if fn is not None and fn(fapl.id, METADATA_READ_ATTEMPTS) < 0:
-        fapl = h5py.h5p.create(h5py.h5p.FILE_ACCESS)  # left as h5py makes it
-        fapl.set_libver_bounds(h5py.h5f.LIBVER_EARLIEST, h5py.h5f.LIBVER_LATEST)
+    if fn is not None:
+        with _hdf5_lock:
+            failed = fn(fapl.id, METADATA_READ_ATTEMPTS) < 0
+        if failed:
+            fapl = h5py.h5p.create(h5py.h5p.FILE_ACCESS)  # left as h5py makes it
+            fapl.set_libver_bounds(h5py.h5f.LIBVER_EARLIEST, h5py.h5f.LIBVER_LATEST)
     name = str(path).encode(sys.getfilesystemencoding(), "surrogateescape")
     fid = h5py.h5f.open(name, h5py.h5f.ACC_RDONLY | h5py.h5f.ACC_SWMR_READ, fapl=fapl)
     return h5py.File(fid)
