@@ -57,6 +57,7 @@ import hashlib
 import json
 import math
 import os
+import threading
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -72,6 +73,7 @@ from sim_backend.dem.threads import one_blas_thread
 
 __all__ = [
     "DEFAULT_OVERLAP_MARGIN",
+    "ScanAhead",
     "StepLimit",
     "StepTooLargeError",
     "check_step",
@@ -80,6 +82,7 @@ __all__ = [
     "largest_stable_step",
     "range_key",
     "reference_overlap_m",
+    "scan_needed",
     "scan_range",
     "spectral_radius",
     "stable_up_to",
@@ -591,6 +594,72 @@ def _known(key: str) -> _RangeVerdict | None:
     return v
 
 
+def _verdict(key: str, chain: Chain, overlap_m: float) -> _RangeVerdict:
+    """What this process, the user's cache folder or the shipped table knows of ``key`` (kept in
+    memory from now on), or a fresh verdict."""
+    v = _RANGE_CACHE.get(key)
+    if v is None:
+        v = _known(key)
+        if v is None:
+            v = _RangeVerdict(_start_m(chain, overlap_m))
+        if len(_RANGE_CACHE) > 256:
+            _RANGE_CACHE.clear()
+        _RANGE_CACHE[key] = v
+    return v
+
+
+def scan_needed(chain: Chain, integrator: str, h: float, overlap_m: float) -> bool:
+    """Whether :func:`stable_up_to` would scan (no verdict for step ``h`` (s) up to ``overlap_m``
+    (m) in memory, in the user's cache folder or shipped), so that a caller can start that scan
+    early (:func:`sim_backend.dem.simulation.simulate` does, while it loads the kernel)."""
+    v = _verdict(range_key(chain, integrator, h), chain, overlap_m)
+    return v.stable_to_m < overlap_m < v.unstable_at_m
+
+
+class ScanAhead:
+    """The stability scans of ``steps`` (s) up to ``overlap_m`` (m) (:func:`stable_up_to`), run in
+    a background thread while the caller does something else (``simulate`` loads its kernel);
+    :meth:`join` waits for them and raises what they raised. The verdicts land where
+    :func:`stable_up_to` keeps them, so the caller's own :func:`check_step` afterwards is served
+    from memory (and refuses an unstable step there, as always).
+
+    The compiled scan is loaded (or compiled) here, in the caller's thread, before the thread
+    starts: numba loads compiled code under one process-wide lock, which the kernel's load holds
+    for about 0.2 s; the scan's arithmetic itself runs without the GIL."""
+
+    def __init__(
+        self, chain: Chain, integrator: str, steps: Sequence[float], overlap_m: float
+    ) -> None:
+        from sim_backend.dem.step_map import warm_up
+
+        warm_up()
+        self._error: BaseException | None = None
+        self._thread = threading.Thread(
+            target=self._run,
+            args=(chain, integrator, tuple(steps), overlap_m),
+            name="biafc-step-stability",
+            daemon=True,
+        )
+        self._thread.start()
+
+    def _run(
+        self, chain: Chain, integrator: str, steps: tuple[float, ...], overlap_m: float
+    ) -> None:
+        try:
+            for h in steps:
+                if not stable_up_to(chain, integrator, h, overlap_m):
+                    break  # unstable: the caller refuses it; the larger steps need no verdict
+        except BaseException as exc:  # raised again by join, in the caller's thread
+            self._error = exc
+
+    def join(self, raise_error: bool = True) -> None:
+        """Wait for the scans; raise their exception (``raise_error``)."""
+        self._thread.join()
+        error, self._error = self._error, None
+        if error is not None and raise_error:
+            raise error
+
+
 def stable_up_to(chain: Chain, integrator: str, h: float, overlap_m: float) -> bool:
     """Whether step ``h`` (s) is linearly stable for every contact overlap from ``delta0`` up to
     ``overlap_m`` (m), checked on the grid ``delta0 RANGE_RATIO^n`` and at the grid point at or
@@ -604,14 +673,7 @@ def stable_up_to(chain: Chain, integrator: str, h: float, overlap_m: float) -> b
     unstable falls back to the exact two-point check of :func:`is_stable` at ``overlap_m``.
     """
     key = range_key(chain, integrator, h)
-    v = _RANGE_CACHE.get(key)
-    if v is None:
-        v = _known(key)
-        if v is None:
-            v = _RangeVerdict(_start_m(chain, overlap_m))
-        if len(_RANGE_CACHE) > 256:
-            _RANGE_CACHE.clear()
-        _RANGE_CACHE[key] = v
+    v = _verdict(key, chain, overlap_m)
     if overlap_m <= v.stable_to_m:
         return True
     if overlap_m >= v.unstable_at_m:

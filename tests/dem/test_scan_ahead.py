@@ -1,0 +1,171 @@
+"""The first ``simulate`` of a process scans the step's stability while the kernel loads
+(``step_limit.ScanAhead``): the step is still refused before any run, the scan's errors reach the
+caller, no thread is left behind, and the verdicts are the ones the call would have computed."""
+
+from __future__ import annotations
+
+import threading
+from typing import Any
+
+import numpy as np
+import pytest
+
+from instruments.burst import Burst
+from sim_backend import dem
+from sim_backend.dem import simulation, step_limit
+from sim_backend.dem.simulation import StepTooLargeError
+
+
+class _KernelSpy:
+    """``run_batch`` that counts its runs (loading it, ``compile``, is not a run)."""
+
+    def __init__(self, real: Any) -> None:
+        self.real = real
+        self.runs = 0
+
+    def __call__(self, *args: Any) -> Any:
+        self.runs += 1
+        return self.real(*args)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.real, name)
+
+
+@pytest.fixture()
+def fresh(monkeypatch: pytest.MonkeyPatch) -> dict[str, Any]:
+    """As in a new process with an empty cache folder: no verdict known, the kernel not loaded
+    (``simulate`` loads it again: a no-op here). Records the scans' threads and the kernel's
+    runs."""
+    monkeypatch.setattr(step_limit, "_RANGE_CACHE", {})
+    monkeypatch.setattr(step_limit, "_STABLE_CACHE", {})
+    monkeypatch.setattr(step_limit, "_LIMIT_CACHE", {})
+    monkeypatch.setattr(step_limit, "_disk_load", lambda key: None)
+    monkeypatch.setattr(step_limit, "_disk_store", lambda key, v: None)
+    monkeypatch.setattr(simulation, "kernel_loaded", lambda: False)
+    seen: dict[str, Any] = {"scans": [], "kernel": _KernelSpy(simulation.run_batch)}
+    monkeypatch.setattr(simulation, "run_batch", seen["kernel"])
+    stable_many = step_limit._stable_many
+
+    def spy(chain: dem.Chain, integrator: str, h: float, *args: Any, **kw: Any) -> list[bool]:
+        seen["scans"].append((threading.current_thread() is threading.main_thread(), h))
+        return stable_many(chain, integrator, h, *args, **kw)
+
+    monkeypatch.setattr(step_limit, "_stable_many", spy)
+    seen["threads"] = threading.active_count()
+    return seen
+
+
+@pytest.fixture(scope="module")
+def not_shipped() -> dem.Chain:
+    """A chain whose verdicts do not ship (the default with another preload)."""
+    return dem.build_chain(dem.load_chain_with_settings(None, ["preload=6 N"]))
+
+
+def _drive(chain: dem.Chain) -> dem.Drive:
+    return dem.Drive("ltr", "displacement", 0.5 * chain.delta0_m, burst=Burst(8.92e3))
+
+
+def test_an_unstable_step_is_refused_before_any_run(
+    fresh: dict[str, Any], not_shipped: dem.Chain
+) -> None:
+    h_bad = 12e-6  # past every stable band of blanes-moan4 on this chain
+    with pytest.raises(StepTooLargeError, match="unstable on this chain"):
+        dem.simulate(not_shipped, [_drive(not_shipped)], duration_s=1e-3,
+                     sample_rate_Hz=1 / h_bad, dt_s=h_bad)  # fmt: skip
+    assert fresh["kernel"].runs == 0
+    # the step's scan ran in the background thread (the first scan; the refusal's bisection for
+    # the largest stable step follows in the caller's thread, as before)
+    assert fresh["scans"][0] == (False, pytest.approx(h_bad))
+    assert threading.active_count() == fresh["threads"]
+
+
+def test_the_scans_error_reaches_the_caller_and_nothing_runs(
+    fresh: dict[str, Any], not_shipped: dem.Chain, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    def broken(*args: Any, **kw: Any) -> list[bool]:
+        raise RuntimeError("scan failed")
+
+    monkeypatch.setattr(step_limit, "_stable_many", broken)
+    with pytest.raises(RuntimeError, match="scan failed"):
+        dem.simulate(not_shipped, [_drive(not_shipped)], duration_s=1e-3, dt_s=2e-6)
+    assert fresh["kernel"].runs == 0
+    assert threading.active_count() == fresh["threads"]
+
+
+def test_the_error_estimates_step_is_scanned_ahead_and_served_from_memory(
+    fresh: dict[str, Any], not_shipped: dem.Chain, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``simulate(..., error_estimate=True)``: the rerun at 2h checks its step; that scan runs
+    while the kernel loads, and the rerun's own check computes nothing. Same result as with the
+    kernel loaded (scans in turn)."""
+    d = _drive(not_shipped)
+    res = dem.simulate(not_shipped, [d], duration_s=2e-3, sample_rate_Hz=200e3,
+                       error_estimate=True)  # fmt: skip
+    h = res.meta["dt_s"]
+    assert [background for background, _ in fresh["scans"]] == [False]
+    assert fresh["scans"][0][1] == simulation.steps_per_sample(2 * h, 100e3)[1]
+    assert fresh["kernel"].runs == 2  # the run and its rerun at 2h
+    assert threading.active_count() == fresh["threads"]
+    step_limit._RANGE_CACHE.clear()
+    monkeypatch.setattr(simulation, "kernel_loaded", lambda: True)
+    again = dem.simulate(not_shipped, [d], duration_s=2e-3, sample_rate_Hz=200e3,
+                         error_estimate=True)  # fmt: skip
+    assert fresh["scans"][1][0] is True  # in turn, in the caller's thread
+    assert np.array_equal(again.velocity, res.velocity)
+    assert np.array_equal(again.meta["error_estimate_rel"], res.meta["error_estimate_rel"])
+
+
+def test_a_fresh_process_refuses_an_unstable_step_before_any_run() -> None:
+    """In a new process (the kernel not loaded, no verdict on disk) the step's scan runs in the
+    background thread while the kernel loads; the unstable step is refused, the kernel loaded
+    but never run, and no thread is left."""
+    import json
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    probe = """
+import json, threading
+from instruments.burst import Burst
+from sim_backend import dem
+from sim_backend.dem import simulation, step_limit
+step_limit._disk_load = lambda key: None
+step_limit._disk_store = lambda key, v: None
+runs, scans = [], []
+real = simulation.run_batch
+class Kernel:
+    def __call__(self, *args):
+        runs.append(1)
+        return real(*args)
+    def __getattr__(self, name):
+        return getattr(real, name)
+simulation.run_batch = Kernel()
+stable_many = step_limit._stable_many
+def spy(*args, **kw):
+    scans.append(threading.current_thread().name)
+    return stable_many(*args, **kw)
+step_limit._stable_many = spy
+chain = dem.build_chain(dem.load_chain_with_settings(None, ["preload=6 N"]))
+d = dem.Drive("ltr", "displacement", 0.5 * chain.delta0_m, burst=Burst(8.92e3))
+loaded_before = simulation.kernel_loaded()
+try:
+    dem.simulate(chain, [d], duration_s=1e-3, sample_rate_Hz=1 / 12e-6, dt_s=12e-6)
+    refused = False
+except simulation.StepTooLargeError:
+    refused = True
+print(json.dumps({"refused": refused, "runs": len(runs), "first_scan": scans[0],
+                  "loaded_before": loaded_before, "loaded_after": simulation.kernel_loaded(),
+                  "threads": threading.active_count()}))
+"""
+    root = Path(__file__).resolve().parents[2]
+    out = subprocess.run([sys.executable, "-c", probe], cwd=root, capture_output=True,
+                         text=True, check=True, timeout=600)  # fmt: skip
+    got = json.loads(out.stdout.strip().splitlines()[-1])
+    assert got == {
+        "refused": True,
+        "runs": 0,
+        "first_scan": "biafc-step-stability",
+        "loaded_before": False,
+        "loaded_after": True,
+        "threads": 1,
+    }
