@@ -33,6 +33,8 @@ from typing import Any
 import h5py
 import numpy as np
 
+from protocols.swmr_read import open_swmr
+
 ROOT = Path(__file__).resolve().parents[1]
 SMOKE = ROOT / "protocols" / "smoke.yaml"
 BENCH = ROOT / "protocols" / "benches" / "sim_bench.yaml"
@@ -221,7 +223,7 @@ def _spawn(args: list[str]) -> subprocess.Popen[str]:
 
 def _n_done(path: Path) -> int:
     try:
-        with h5py.File(path, "r", swmr=True) as f:
+        with open_swmr(path) as f:
             return int(np.sum(f["scan/ltr/done"][...] == 1))
     except (OSError, KeyError):
         return -1

@@ -17,6 +17,7 @@ import pytest
 import daq.connect
 from daq.cli import run_protocol as rp
 from protocols.runfile import PointState, read_run
+from protocols.swmr_read import open_swmr
 
 from .fakes import FakeWorld, fake_bench
 from .helpers import PROTOCOL
@@ -133,7 +134,7 @@ def _wait_done(path: Path, n: int, proc: subprocess.Popen[str], timeout_s: float
         assert proc.poll() is None, proc.communicate()
         if path.exists():
             try:
-                with h5py.File(path, "r", swmr=True) as f:
+                with open_swmr(path) as f:
                     got = int(np.sum(f["scan/ltr/done"][...] == PointState.DONE))
                 if got >= n:
                     return got

@@ -16,6 +16,7 @@ from daq.engine import EventKind, RunEngine, RunEvent
 from protocols.bench import load_bench
 from protocols.runfile import PointState, read_run
 from protocols.schema import load_protocol
+from protocols.swmr_read import open_swmr
 
 ROOT = Path(__file__).resolve().parents[2] / "protocols"
 
@@ -114,8 +115,6 @@ def test_sigkill_then_resume_on_the_sim_bench(tmp_path: Path) -> None:
     import sys
     import time
 
-    import h5py
-
     bench = tmp_path / "slow_bench.yaml"
     bench.write_text(load_bench().text.replace("speedup: 0 ", "speedup: 20 "))
     args = [str(ROOT / "smoke.yaml"), "--bench", str(bench), "--seed", "7", "--quiet"]
@@ -130,7 +129,7 @@ def test_sigkill_then_resume_on_the_sim_bench(tmp_path: Path) -> None:
         assert proc.poll() is None, proc.communicate()
         time.sleep(0.05)
         try:
-            with h5py.File(killed, "r", swmr=True) as f:
+            with open_swmr(killed) as f:
                 n = int(np.sum(f["scan/ltr/done"][...] == PointState.DONE))
         except (OSError, KeyError):
             pass
@@ -155,8 +154,6 @@ def test_sigint_aborts_and_the_emulated_generator_is_off(
     import signal
     import time
 
-    import h5py
-
     import daq.connect
 
     made: list = []
@@ -175,7 +172,7 @@ def test_sigint_aborts_and_the_emulated_generator_is_off(
         t_end = time.monotonic() + 60
         while time.monotonic() < t_end:
             try:
-                with h5py.File(out, "r", swmr=True) as f:
+                with open_swmr(out) as f:
                     if f["scan/ltr/done"][...].sum() >= 1:
                         break
             except (OSError, KeyError):
