@@ -26,7 +26,7 @@ class CompileNotice:
         if phase == "start":
             self.stream.write(
                 f"{what} the DEM kernel for this machine: once per installation, usually "
-                f"10-40 s; kept in {folder} (`biafc warmup` does it ahead of time)\n"
+                f"5-20 s; kept in {folder} (`biafc warmup` does it ahead of time)\n"
             )
         elif phase == "tick" and self.tty:
             self.stream.write(f"\r  {what} the DEM kernel ... {elapsed_s:4.0f} s")

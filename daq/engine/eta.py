@@ -56,9 +56,10 @@ ARM_S = 0.5
 #: measured point times replace it during a run)
 SECONDS_PER_MODE_STEP = 25e-9
 #: first use of the model on a machine: numba compiles the kernel (then cached on disk); measured
-#: 2026-11-25 on a 2-core host: 24 s quiet, 34 s in a fresh-clone README run (15 s before the
-#: split steps; docs/performance.md section 3)
-COMPILE_S = 25.0
+#: 2026-11-25 on a 2-core host under a load of 2.2-2.8: 6.3-6.6 s, and 7.4 s to the first point of
+#: a cold ``run_protocol smoke`` (20-26 s before the kernel's chunks left numba's ``parallel=``;
+#: docs/performance.md section 3)
+COMPILE_S = 8.0
 #: simulated bench, per point and per recorded sample (emulators, noise, digitiser)
 SIM_POINT_S = 2e-3
 SIM_SAMPLE_S = 7e-8
@@ -122,7 +123,7 @@ def _model_compiled() -> bool:
     import sys
 
     kernel = sys.modules.get("sim_backend.dem.kernel")
-    return bool(kernel is not None and kernel.run_batch.signatures)
+    return bool(kernel is not None and kernel.run_chunks.signatures)
 
 
 def _dem_run_s(bench_file: Any) -> float:

@@ -28,6 +28,16 @@ sums the primary displacement and velocity (``u``, ``u'``) in registers; one alo
 carrying the neighbours' values in registers, gives the Hertz forces, the forces at the start
 velocities and, one contact behind, the stage velocities and the forces there.
 
+The chunks are independent: :func:`run_batch` hands them to ``numba.get_num_threads()`` threads
+that each call the compiled :func:`run_chunks` (serial, without the GIL) on the next chunk not
+taken. Not numba's ``parallel=`` and ``prange``: numba compiles a parallel loop's body as a
+function of its own and links it, with all it calls, into three more libraries (the gufunc
+wrapper, the parallel wrapper, the caller), each optimised by LLVM and turned into machine code
+again, and its parallel passes walk the body's IR besides; the kernel's first-use compile took
+20-26 s so, 6.3-6.6 s now (docs/performance.md, section 3). In the compiled chunk loop, no
+helper inlined by numba takes an array (numba reference-counts the array it binds, around every
+call), and the drives are read by row index (:func:`drive_value`), not as row views.
+
 Steps split at the drives' breakpoints (``split_steps`` = 1, :mod:`sim_backend.dem.split_steps`):
 an analytic burst's start and end, where a moving wall's velocity jumps and the actuator
 contact's dashpot force with it, are known before the run. A step that holds one strictly inside
@@ -53,8 +63,9 @@ when ``energy`` has 5 columns).
 
 from __future__ import annotations
 
+import itertools
 import math
-from typing import Any
+import threading
 
 import numba
 import numpy as np
@@ -76,25 +87,11 @@ from sim_backend.dem.split_steps import (
 
 install_cache_locator()  # compiled code goes to the user's cache folder, not next to the sources
 
-__all__ = ["NUMERICS_VERSION", "drift_coefficients", "drive_value", "run_batch"]
+__all__ = ["NUMERICS_VERSION", "drift_coefficients", "drive_value", "run_batch", "run_chunks"]
 
 #: changes whenever the kernel's arithmetic changes its results beyond rounding; cached converged
 #: references (``sim_backend.dem.converged``) are keyed by it
 NUMERICS_VERSION = "3: steps split at the burst ends"
-
-#: run_batch is parallel over its chunks (prange) and nothing else: numba's conversion of the
-#: chunk body's array allocations and copies into nested parallel loops, and their fusion, only
-#: cost compile time (they run once per chunk, inside a loop that is already parallel)
-_ONLY_PRANGE: Any = {  # numba accepts these options where its stubs say bool
-    "prange": True,
-    "comprehension": False,
-    "reduction": False,
-    "inplace_binop": False,
-    "setitem": False,
-    "numpy": False,
-    "stencil": False,
-    "fusion": False,
-}
 
 
 def drift_coefficients(
@@ -120,17 +117,17 @@ def drift_coefficients(
 
 
 @numba.njit(inline="always")
-def _burst(tau: float, prm: NDArray[np.float64]) -> tuple[float, float]:
-    """(value, d value/dt) of the analytic burst of :func:`drive_value` at ``tau`` s after its
-    start, by its formula whether or not ``0 < tau < T``."""
-    amp = prm[0]
-    sig = prm[3]
-    x = tau - prm[4]
+def _burst(tau: float, prm: NDArray[np.float64], r: int) -> tuple[float, float]:
+    """(value, d value/dt) of the analytic burst of drive ``r`` (:func:`drive_value`) at
+    ``tau`` s after its start, by its formula whether or not ``0 < tau < T``."""
+    amp = prm[r, 0]
+    sig = prm[r, 3]
+    x = tau - prm[r, 4]
     g = math.exp(-x * x / (2.0 * sig * sig))
-    norm = 1.0 / (1.0 - prm[5])
-    env = (g - prm[5]) * norm
+    norm = 1.0 / (1.0 - prm[r, 5])
+    env = (g - prm[r, 5]) * norm
     denv = -x / (sig * sig) * g * norm
-    om = 2.0 * math.pi * prm[1]
+    om = 2.0 * math.pi * prm[r, 1]
     cs = math.cos(om * x)
     sn = math.sin(om * x)
     return amp * env * cs, amp * (denv * cs - env * om * sn)
@@ -138,30 +135,38 @@ def _burst(tau: float, prm: NDArray[np.float64]) -> tuple[float, float]:
 
 @numba.njit(cache=True)
 def drive_value(
-    t: float, src: int, prm: NDArray[np.float64], table: NDArray[np.float64], n_table: int
+    t: float,
+    r: int,
+    src: NDArray[np.int64],
+    prm: NDArray[np.float64],
+    tables: NDArray[np.float64],
+    n_table: NDArray[np.int64],
 ) -> tuple[float, float]:
-    """(value, d value/dt) of one drive at trigger time ``t`` (s).
+    """(value, d value/dt) of drive ``r`` at trigger time ``t`` (s); ``src``, ``prm``,
+    ``tables``, ``n_table`` are :func:`run_chunks`' (every drive: a row of each is not taken
+    as an array of its own, whose reference counting cost the kernel 6 %).
 
-    ``src`` 0: analytic Gaussian burst, ``prm`` = (amp, f, T, sigma, t0, e_end, delay, -);
-    ``src`` 1: table of ``n_table`` samples at rate ``prm[7]`` played from ``delay``, linear.
+    ``src[r]`` 0: analytic Gaussian burst, ``prm[r]`` = (amp, f, T, sigma, t0, e_end, delay, -);
+    ``src[r]`` 1: table of ``n_table[r]`` samples at rate ``prm[r, 7]`` played from ``delay``,
+    linear.
     """
-    amp = prm[0]
+    amp = prm[r, 0]
     if amp == 0.0:
         return 0.0, 0.0
-    tau = t - prm[6]
-    if src == 0:
-        T = prm[2]
+    tau = t - prm[r, 6]
+    if src[r] == 0:
+        T = prm[r, 2]
         if tau <= 0.0 or tau >= T:
             return 0.0, 0.0
-        return _burst(tau, prm)
-    rate = prm[7]
+        return _burst(tau, prm, r)
+    rate = prm[r, 7]
     xs = tau * rate
-    if xs < 0.0 or xs >= n_table - 1:
+    if xs < 0.0 or xs >= n_table[r] - 1:
         return 0.0, 0.0
     j = int(xs)
     fr = xs - j
-    a = table[j]
-    b = table[j + 1]
+    a = tables[r, j]
+    b = tables[r, j + 1]
     return amp * (a + fr * (b - a)), amp * (b - a) * rate
 
 
@@ -169,20 +174,21 @@ def drive_value(
 def drive_piece(
     t: float,
     side: float,
-    src: int,
+    r: int,
+    src: NDArray[np.int64],
     prm: NDArray[np.float64],
-    table: NDArray[np.float64],
-    n_table: int,
+    tables: NDArray[np.float64],
+    n_table: NDArray[np.int64],
 ) -> tuple[float, float]:
     """:func:`drive_value` at ``t`` (s) by the formula that holds at ``side`` (s), a time between
     the same two breakpoints (:mod:`sim_backend.dem.split_steps`): an analytic burst's value
     and slope on that side of its start and end, also at the breakpoint itself."""
-    if src != 0 or prm[0] == 0.0:
-        return drive_value(t, src, prm, table, n_table)
-    tau_side = side - prm[6]
-    if tau_side <= 0.0 or tau_side >= prm[2]:
+    if src[r] != 0 or prm[r, 0] == 0.0:
+        return drive_value(t, r, src, prm, tables, n_table)
+    tau_side = side - prm[r, 6]
+    if tau_side <= 0.0 or tau_side >= prm[r, 2]:
         return 0.0, 0.0
-    return _burst(t - prm[6], prm)
+    return _burst(t - prm[r, 6], prm, r)
 
 
 @numba.njit(cache=True)
@@ -253,6 +259,24 @@ def _primary(x: NDArray[np.float64], phi: NDArray[np.float64], i: int, W: int, g
     for k in range(K):
         acc = vfma(vsplat(phi[i, k]), vload(x, (i * K + k) * W + g), acc)
     return acc
+
+
+@numba.njit(cache=True)
+def _record(
+    buf: NDArray[np.float64],  # [REC_BLOCK, C, W] flat
+    x: NDArray[np.float64],  # [N K W] flat: q or p
+    phi: NDArray[np.float64],  # [N, K]
+    rec: NDArray[np.int64],  # [C] the cylinders recorded
+    slot: int,
+    W: int,
+) -> None:
+    """``buf[slot, c]`` = the primary-mass displacement (``x = q``) or velocity (``x = p``) of
+    cylinder ``rec[c]``, every lane (a function of its own: inlined into the sample loop, its
+    array arguments were reference-counted at every cylinder and lane group)."""
+    C = rec.size
+    for c in range(C):
+        for g in range(0, W, 4):
+            vstore(buf, (slot * C + c) * W + g, _primary(x, phi, rec[c], W, g))
 
 
 @numba.njit(cache=True)
@@ -337,28 +361,10 @@ def _far_end_force(fh: Vec4, chi: float, v: Vec4, far_wall: int, f0: float) -> V
     return vsplat(f0)
 
 
-@numba.njit(inline="always")
-def _kick_end(
-    heun: bool,
-    vs: NDArray[np.float64],  # [N, W] flat: stage velocities (m/s)
-    force: NDArray[np.float64],  # [N, W] flat: forces on the primary masses (N)
-    j: int,  # index of the cylinder's first lane
-    v_start: Vec4,  # the cylinder's velocity at the kick's start (m/s)
-    step: float,  # 2/3 x kick length / m0 (s/kg)
-    k2_left: Vec4,  # forces k2 of the contacts left and right of the cylinder (N)
-    k2_right: Vec4,
-) -> None:
-    """A damped kick's second sweep done for one cylinder: with Heun kicks its second stage
-    velocity ``v + (2h/3) (k2_left - k2_right) / m0`` (into ``vs``), else (explicit midpoint) the
-    force ``k2_left - k2_right`` on it (into ``force``)."""
-    if heun:
-        vstore(vs, j, v_start + step * (k2_left - k2_right))
-    else:
-        vstore(force, j, k2_left - k2_right)
-
-
-@numba.njit(cache=True, parallel=_ONLY_PRANGE)
-def run_batch(
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def run_chunks(
+    first: int,  # the chunks first .. stop - 1 of lane_traj
+    stop: int,
     phi0: NDArray[np.float64],  # [2, N, K] primary component of mass-normalised block modes
     omega: NDArray[np.float64],  # [2, N, K] block mode angular frequencies
     drift: NDArray[np.float64],  # [2, nd, N, K, 4] drift coefficients per drift kind
@@ -395,7 +401,9 @@ def run_batch(
     heun_kicks: int = 0,  # 1: damped kicks by Heun's third-order rule, 0: explicit midpoint
     split_steps: int = 1,  # 1: steps split at the bursts' start and end (module docstring)
 ) -> None:
-    n_chunks, W = lane_traj.shape
+    """The chunks ``first .. stop - 1`` of ``lane_traj`` (:func:`run_batch` runs them all, on
+    threads); numba's ``error_model="numpy"``, as for the parallel loop's body it was."""
+    W = lane_traj.shape[1]
     N = phi0.shape[1]
     K = phi0.shape[2]
     C = rec_idx.shape[1]
@@ -439,7 +447,7 @@ def run_batch(
     kick_flag[n_kicks] = 2
     period = h * n_sub
     nd = drift.shape[1]
-    for ch in numba.prange(n_chunks):
+    for ch in range(first, stop):
         o = chunk_orient[ch]
         sign = -1.0 if o == 1 else 1.0  # recorded along the chain's axis (#1 towards #N)
         lanes = lane_traj[ch]
@@ -461,6 +469,7 @@ def run_batch(
         buf_disp = np.zeros(REC_BLOCK * C * W if rec_disp else 0)
         phi = phi0[o]
         d0 = rest[o]
+        rec = rec_idx[o]
         x0 = chi[o]
         im0 = inv_m0[o]
         # steps split at the drives' breakpoints: the samples that hold one, per lane
@@ -474,7 +483,11 @@ def run_batch(
         split_at, n_pass_max = split_samples(bp_n, bp_smp, bp_st, bp_y)
         # the drift kinds, then room for the split steps' drifts
         co = np.empty((nd + n_pass_max * pass_drifts(m), N, K, 4))
-        co[:nd] = drift[o]
+        for a in range(nd):  # element loops: no slice assignment's shape check in the body
+            for i in range(N):
+                for k in range(K):
+                    for c in range(4):
+                        co[a, i, k, c] = drift[o, a, i, k, c]
         n_split = split_at.size
         next_split = split_at[0] if n_split > 0 else -1
         i_split = 0
@@ -512,13 +525,10 @@ def run_batch(
             # record the state at t = s / rate (into the block buffers, copied out every
             # REC_BLOCK samples)
             slot = s % REC_BLOCK
-            for c in range(C if (rec_vel or rec_disp) else 0):
-                i = rec_idx[o, c]
-                for g in range(0, W, 4):
-                    if rec_vel:
-                        vstore(buf_vel, (slot * C + c) * W + g, _primary(p, phi, i, W, g))
-                    if rec_disp:
-                        vstore(buf_disp, (slot * C + c) * W + g, _primary(q, phi, i, W, g))
+            if rec_vel:
+                _record(buf_vel, p, phi, rec, slot, W)
+            if rec_disp:
+                _record(buf_disp, q, phi, rec, slot, W)
             if slot == REC_BLOCK - 1 or s == n_samples - 1:
                 _copy_out(buf_vel, vel, lanes, s - slot, slot + 1, sign)
                 _copy_out(buf_disp, disp, lanes, s - slot, slot + 1, sign)
@@ -526,7 +536,7 @@ def run_batch(
                 for b in range(W):
                     r = lanes[b]
                     if r >= 0:
-                        drv[r, s] = drive_value(t, src[r], prm[r], tables[r], n_table[r])[0]
+                        drv[r, s] = drive_value(t, r, src, prm, tables, n_table)[0]
             if s == n_samples - 1:
                 break
             if stop_every > 0 and s > 0 and s % stop_every == 0:
@@ -614,10 +624,9 @@ def run_batch(
                 for b in range(W):
                     r = lanes[b]
                     if r >= 0 and side == side:
-                        dval[b], ddot[b] = drive_piece(t, side, src[r], prm[r], tables[r],
-                                                       n_table[r])  # fmt: skip
+                        dval[b], ddot[b] = drive_piece(t, side, r, src, prm, tables, n_table)
                     elif r >= 0 and t_on <= t < t_off:
-                        dval[b], ddot[b] = drive_value(t, src[r], prm[r], tables[r], n_table[r])
+                        dval[b], ddot[b] = drive_value(t, r, src, prm, tables, n_table)
                     else:
                         dval[b] = 0.0
                         ddot[b] = 0.0
@@ -668,8 +677,12 @@ def run_batch(
                                 k2 = _actuator_force(g_prev, x0[0], wl, dd, va, drive_force)
                             else:
                                 k2 = _dashpot(g_prev, x0[j - 1], va_pp - va)
-                                step = hk * im0[j - 2] * (2.0 / 3.0)
-                                _kick_end(heun, vs, force, (j - 2) * W + g, v_pp, step, k2_pp, k2)
+                                # cylinder j-2's second stage velocity (Heun) or force
+                                if heun:
+                                    step = hk * im0[j - 2] * (2.0 / 3.0)
+                                    vstore(vs, (j - 2) * W + g, v_pp + step * (k2_pp - k2))
+                                else:
+                                    vstore(force, (j - 2) * W + g, k2_pp - k2)
                             v_pp = v_prev
                             va_pp = va
                             k2_pp = k2
@@ -679,8 +692,11 @@ def run_batch(
                         f_prev = fj
                     if damped:  # the far-end contact's k2; the last cylinder's force or vb
                         k2 = _far_end_force(g_prev, x0[N], va_pp, far_wall, f0)
-                        step = hk * im0[N - 1] * (2.0 / 3.0)
-                        _kick_end(heun, vs, force, (N - 1) * W + g, v_pp, step, k2_pp, k2)
+                        if heun:
+                            step = hk * im0[N - 1] * (2.0 / 3.0)
+                            vstore(vs, (N - 1) * W + g, v_pp + step * (k2_pp - k2))
+                        else:
+                            vstore(force, (N - 1) * W + g, k2_pp - k2)
                 if not (damped and heun):
                     continue
                 # ---- pass 3 (damped): the forces k3 at the second stage velocities, and the
@@ -714,7 +730,7 @@ def run_batch(
             r = lanes[b]
             if r < 0:
                 continue
-            dv_end = drive_value(t, src[r], prm[r], tables[r], n_table[r])[0]
+            dv_end = drive_value(t, r, src, prm, tables, n_table)[0]
             hh = _lane_energy(q3, p3, scratch, b, phi, omega[o], dv_end, dkind[r], beta, d0, f0,
                               far_wall)  # fmt: skip
             energy[r, 0] = (n_contacts + (1 if dkind[r] == 0 else 0)) * u0_static
@@ -728,3 +744,74 @@ def run_batch(
                 for i in range(N):
                     mom += p3[i, 0, b] / phi[i, 0]
                 energy[r, 5] = mom
+
+
+def run_batch(
+    phi0: NDArray[np.float64],
+    omega: NDArray[np.float64],
+    drift: NDArray[np.float64],
+    chi: NDArray[np.float64],
+    inv_m0: NDArray[np.float64],
+    lane_traj: NDArray[np.int64],
+    chunk_orient: NDArray[np.int64],
+    dkind: NDArray[np.int64],
+    src: NDArray[np.int64],
+    prm: NDArray[np.float64],
+    tables: NDArray[np.float64],
+    n_table: NDArray[np.int64],
+    kick_b: NDArray[np.float64],
+    drift_a: NDArray[np.float64],
+    drift_seq: NDArray[np.int64],
+    drift_merge: int,
+    h: float,
+    n_sub: int,
+    n_samples: int,
+    beta: float,
+    rest: NDArray[np.float64],
+    f0: float,
+    far_wall: int,
+    rec_idx: NDArray[np.int64],
+    vel: NDArray[np.float64],
+    disp: NDArray[np.float64],
+    drv: NDArray[np.float64],
+    energy: NDArray[np.float64],
+    zeta: NDArray[np.float64],
+    record_flags: int = 7,
+    stop_every: int = 0,
+    stop_fraction: float = 0.0,
+    heun_kicks: int = 0,
+    split_steps: int = 1,
+) -> None:
+    """Every chunk of ``lane_traj``: :func:`run_chunks` (the same arguments after ``first`` and
+    ``stop``) on ``numba.get_num_threads()`` threads at most, this one among them, each taking
+    the next chunk not yet taken (module docstring). The chunks are independent (each writes
+    only its own trajectories' outputs): the result does not depend on the threads."""
+    args = (
+        phi0, omega, drift, chi, inv_m0, lane_traj, chunk_orient, dkind, src, prm, tables,
+        n_table, kick_b, drift_a, drift_seq, drift_merge, h, n_sub, n_samples, beta, rest, f0,
+        far_wall, rec_idx, vel, disp, drv, energy, zeta, record_flags, stop_every, stop_fraction,
+        heun_kicks, split_steps,
+    )  # fmt: skip
+    n_chunks = lane_traj.shape[0]
+    n_threads = min(numba.get_num_threads(), n_chunks)
+    if n_threads <= 1:
+        run_chunks(0, n_chunks, *args)
+        return
+    taken = itertools.count()  # next() is atomic under the GIL
+    errors: list[BaseException] = []
+
+    def work() -> None:
+        try:
+            while (ch := next(taken)) < n_chunks:
+                run_chunks(ch, ch + 1, *args)
+        except BaseException as exc:  # re-raised in the calling thread
+            errors.append(exc)
+
+    others = [threading.Thread(target=work, name=f"dem-kernel-{j}") for j in range(1, n_threads)]
+    for thread in others:
+        thread.start()
+    work()
+    for thread in others:
+        thread.join()
+    if errors:
+        raise errors[0]

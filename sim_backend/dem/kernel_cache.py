@@ -1,6 +1,6 @@
 """Where the compiled DEM kernel lives, and a notice while it compiles.
 
-numba compiles the kernel (:mod:`sim_backend.dem.kernel`) on first use, 10-30 s, and keeps the
+numba compiles the kernel (:mod:`sim_backend.dem.kernel`) on first use, 6-10 s, and keeps the
 machine code on disk. By default numba writes it next to the sources (inside the checkout of an
 editable install, in a possibly read-only site-packages otherwise); here it goes to the user's
 cache folder, ``<cache_dir>/numba`` (:func:`sim_backend.dem.user_cache.cache_dir`: platformdirs'
@@ -104,16 +104,16 @@ def kernel_cached_on_disk() -> bool:
     env = os.environ.get("NUMBA_CACHE_DIR")
     folder = Path(env) if env else kernel_cache_dir()
     try:
-        return any(folder.rglob("kernel.run_batch-*.nbi"))
+        return any(folder.rglob("kernel.run_chunks-*.nbi"))
     except OSError:
         return False
 
 
 def kernel_loaded() -> bool:
     """Whether this process has the kernel compiled or loaded already."""
-    from sim_backend.dem.kernel import run_batch
+    from sim_backend.dem.kernel import run_chunks
 
-    return bool(run_batch.signatures)
+    return bool(run_chunks.signatures)
 
 
 def set_compile_reporter(reporter: CompileReporter | None) -> CompileReporter | None:

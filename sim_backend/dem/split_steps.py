@@ -190,21 +190,30 @@ def split_samples(
     bp_y: NDArray[np.float64],
 ) -> tuple[NDArray[np.int64], int]:
     """(the samples holding a breakpoint of some lane, ascending; the most passes one of them
-    needs)."""
+    needs). At most ``2 W`` samples, sorted by insertion (``np.unique``'s sort and array
+    checks would be compiled into the kernel's chunk body, four times: module docstring of
+    :mod:`sim_backend.dem.kernel`)."""
     W = bp_n.size
     cand = np.empty(W * MAX_PER_LANE, dtype=np.int64)
     n = 0
     for b in range(W):
         for j in range(bp_n[b]):
-            cand[n] = bp_smp[b, j]
+            x = bp_smp[b, j]
+            at = n  # insert x, keeping cand[:n] ascending and without repeats
+            while at > 0 and cand[at - 1] > x:
+                at -= 1
+            if at > 0 and cand[at - 1] == x:
+                continue
+            for i in range(n, at, -1):
+                cand[i] = cand[i - 1]
+            cand[at] = x
             n += 1
-    cand = np.unique(cand[:n])
     group = np.empty(W, dtype=np.int64)
     most = 0
-    for j in range(cand.size):
+    for j in range(n):
         n_groups = lane_groups(int(cand[j]), bp_n, bp_smp, bp_st, bp_y, group)
         most = max(most, n_groups)
-    return cand, most
+    return cand[:n], most
 
 
 @numba.njit(cache=True)
@@ -324,13 +333,17 @@ def save_state(
     force: NDArray[np.float64],  # [N W] flat
     work: NDArray[np.float64],  # [W]
 ) -> None:
-    """``keep`` = (q, p, force, work) of a chunk."""
+    """``keep`` = (q, p, force, work) of a chunk (element loops: a slice assignment compiles
+    its shape check and error message into the kernel's chunk body)."""
     nq = q.size
     nf = force.size
-    keep[:nq] = q
-    keep[nq : 2 * nq] = p
-    keep[2 * nq : 2 * nq + nf] = force
-    keep[2 * nq + nf :] = work
+    for j in range(nq):
+        keep[j] = q[j]
+        keep[nq + j] = p[j]
+    for j in range(nf):
+        keep[2 * nq + j] = force[j]
+    for j in range(work.size):
+        keep[2 * nq + nf + j] = work[j]
 
 
 @numba.njit(cache=True)
@@ -341,13 +354,16 @@ def load_state(
     force: NDArray[np.float64],
     work: NDArray[np.float64],
 ) -> None:
-    """(q, p, force, work) of a chunk = ``keep``."""
+    """(q, p, force, work) of a chunk = ``keep`` (element loops, as :func:`save_state`)."""
     nq = q.size
     nf = force.size
-    q[:] = keep[:nq]
-    p[:] = keep[nq : 2 * nq]
-    force[:] = keep[2 * nq : 2 * nq + nf]
-    work[:] = keep[2 * nq + nf :]
+    for j in range(nq):
+        q[j] = keep[j]
+        p[j] = keep[nq + j]
+    for j in range(nf):
+        force[j] = keep[2 * nq + j]
+    for j in range(work.size):
+        work[j] = keep[2 * nq + nf + j]
 
 
 @numba.njit(cache=True)

@@ -41,7 +41,7 @@ def _kernel_args(n_drives: int) -> dict[str, Any]:
     captured: dict[str, Any] = {}
 
     def capture(*args: Any) -> None:
-        names = list(inspect.signature(kernel.run_batch.py_func).parameters)
+        names = list(inspect.signature(kernel.run_batch).parameters)
         captured.update(zip(names, args, strict=False))
 
     amp = float(np.float32(chain.delta0_m))

@@ -14,7 +14,7 @@ from daq.cli.compile_notice import CompileNotice
 from sim_backend.dem import kernel_cache
 
 ROOT = Path(__file__).resolve().parents[2]
-PROBE = "from sim_backend.dem import kernel; print(kernel.run_batch._cache._cache_path)"
+PROBE = "from sim_backend.dem import kernel; print(kernel.run_chunks._cache._cache_path)"
 
 
 def _cache_path(env_dir: str) -> Path:

@@ -113,7 +113,12 @@ def _counted_run(
             monkeypatch.setattr(kernel, name, obj.py_func)
     _COUNT.clear()
     args = captured["args"]
-    kernel.run_batch(*args)
+    threads = numba.get_num_threads()
+    numba.set_num_threads(1)  # the chunks one after the other: the counter is not thread-safe
+    try:
+        kernel.run_batch(*args)
+    finally:
+        numba.set_num_threads(threads)
     assert np.all(np.isfinite(args[24]))  # the Python kernel ran on real numbers
     lane_traj, n_sub, n_samples, far_wall = args[5], args[17], args[18], args[22]
     info = {

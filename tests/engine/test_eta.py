@@ -105,7 +105,7 @@ def test_model_compiled_looks_where_the_kernel_is_cached(tmp_path, monkeypatch) 
     # this process may have loaded the kernel already: only the disk counts here
     monkeypatch.delitem(sys.modules, "sim_backend.dem.kernel", raising=False)
     assert not eta_mod.model_compiled()
-    index = tmp_path / "numba" / "sim_backend" / "dem" / "kernel.run_batch-42.py311.nbi"
+    index = tmp_path / "numba" / "sim_backend" / "dem" / "kernel.run_chunks-42.py311.nbi"
     index.parent.mkdir(parents=True)
     index.write_bytes(b"")
     assert eta_mod.model_compiled()
