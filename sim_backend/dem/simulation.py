@@ -17,7 +17,7 @@ from sim_backend.dem.chain import Chain
 from sim_backend.dem.defaults import DEFAULT_DT_S, DEFAULT_DT_TOP_HZ, DEFAULT_INTEGRATOR
 from sim_backend.dem.drive import Drive
 from sim_backend.dem.errors import step_doubling_error
-from sim_backend.dem.kernel import drift_coefficients, run_batch
+from sim_backend.dem.kernel import drift_coefficients, load_for, run_batch
 from sim_backend.dem.kernel_cache import compile_notice, kernel_loaded
 from sim_backend.dem.step_limit import (
     ScanAhead,
@@ -256,7 +256,7 @@ def _scan_ahead(
 
 def _load_kernel(args: tuple[Any, ...]) -> None:
     """Load (or compile) the kernel for these arguments without running it."""
-    run_batch.compile(tuple(run_batch.typeof_pyval(a) for a in args))
+    load_for(*args)
 
 
 def simulate(
