@@ -14,15 +14,27 @@
   estimate, the check then served from memory) and the check as a fraction of that run. For
   (a) the shipped default chain, whose verdict comes with the package
   (:mod:`sim_backend.dem.shipped_stability`); (b) a chain that does not ship (the default with
-  ``preload=6 N``), computed: its first key, then its later keys; (c) that chain in a new process,
+  ``preload=6 N``), computed: its first key, then its later keys (medians of ``CHECK_REPS``
+  processes); (c) that chain in a new process,
   the verdict on disk; (d) its first key with no compiled step map on disk (numba compiles it).
   Target: < 5 % of the run.
+- what the check adds to a fresh process's first run (both sides include the kernel's load from
+  the cache folder): ``FIRST_RUN_REPS`` pairs of fresh processes, interleaved, each timing its
+  first ``simulate`` (the chain that does not ship, LTR 0.5 um, 30 ms at 200 kS/s with the
+  error estimate, whose rerun at 2h is checked) and then a second one (the run alone); one of
+  each pair with no verdict in the user cache (the check is computed: since the scan-ahead, while
+  the kernel loads), the other with the verdict on disk. Reported: the medians, their difference
+  and that difference as a fraction of the first ``simulate`` and of the run.
 - ``run_protocol smoke`` as a subprocess on the simulated bench: cold (an empty cache folder,
   ``$BIAFC_CACHE_DIR``: the kernel compiles) and warm (the same folder again), the time from the
   start of the process to its first measured point (the first ``point 1/`` line) and to its
   exit. Target: warm < 2 s.
 
-Each figure is printed with the host's load average (``os.getloadavg``) at the time.
+Each figure is printed with the host's load average (``os.getloadavg``) at the time. The
+check's subprocesses run with Python's bytecode cache on (``PYTHONDONTWRITEBYTECODE`` dropped),
+as an installed package has it: otherwise every fresh process compiles the modules it imports
+from source, a cost the check's first key would carry (it imports the step map) and a user's
+process does not.
 """
 
 from __future__ import annotations
@@ -146,12 +158,19 @@ _CHECK_CODE = textwrap.dedent(
 NOT_SHIPPED = ["preload=6 N"]  # the default chain with one setting changed: not in the table
 
 
+def _check_env(cache: Path) -> dict[str, str]:
+    """A subprocess's environment: ``cache`` as the user cache folder, numba's own cache
+    settings and ``PYTHONDONTWRITEBYTECODE`` dropped (module docstring)."""
+    env = dict(os.environ, BIAFC_CACHE_DIR=str(cache))
+    for var in ("NUMBA_CACHE_DIR", "NUMBA_CACHE_LOCATOR_CLASSES", "PYTHONDONTWRITEBYTECODE"):
+        env.pop(var, None)
+    return env
+
+
 def _check_process(cache: Path, settings: list[str], runs: bool) -> list[dict[str, Any]]:
     """One fresh process checking the keys (and timing their runs) with ``cache`` as the user
     cache folder."""
-    env = dict(os.environ, BIAFC_CACHE_DIR=str(cache))
-    for var in ("NUMBA_CACHE_DIR", "NUMBA_CACHE_LOCATOR_CLASSES"):
-        env.pop(var, None)
+    env = _check_env(cache)
     code = _CHECK_CODE.format(settings=settings, rate=SMOKE_RATE_HZ, amplitudes=list(SMOKE_KEYS_M),
                               runs=runs, duration=DEM_DURATION_S)  # fmt: skip
     out = subprocess.run(
@@ -164,6 +183,28 @@ def _check_process(cache: Path, settings: list[str], runs: bool) -> list[dict[st
 
 def _forget_verdicts(cache: Path) -> None:
     (cache / "step-stability.json").unlink(missing_ok=True)
+
+
+CHECK_REPS = 5
+
+
+def _median_process(cache: Path, settings: list[str]) -> list[dict[str, Any]]:
+    """:func:`_check_process` with no verdict on disk, ``CHECK_REPS`` times: per key the median
+    check and run (one fresh process's first key varies by several ms on a loaded host)."""
+    import statistics
+
+    reps = []
+    for _ in range(CHECK_REPS):
+        _forget_verdicts(cache)
+        reps.append(_check_process(cache, settings, runs=True))
+    return [
+        {
+            "amplitude_m": keys[0]["amplitude_m"],
+            "check_s": statistics.median(k["check_s"] for k in keys),
+            "run_s": statistics.median(k["run_s"] for k in keys),
+        }
+        for keys in zip(*reps, strict=True)
+    ]
 
 
 def _stability_rows(cache: Path) -> list[dict[str, Any]]:
@@ -188,9 +229,9 @@ def _stability_rows(cache: Path) -> list[dict[str, Any]]:
     _forget_verdicts(cache)
     shipped = _check_process(cache, [], runs=True)
     add("shipped chain, no verdict in the user cache", shipped, shipped)
-    _forget_verdicts(cache)
-    computed = _check_process(cache, NOT_SHIPPED, runs=True)
-    add("chain not shipped, no verdict in the user cache", computed, computed)
+    computed = _median_process(cache, NOT_SHIPPED)
+    add(f"chain not shipped, no verdict in the user cache, median of {CHECK_REPS} processes",
+        computed, computed)  # fmt: skip
     on_disk = _check_process(cache, NOT_SHIPPED, runs=False)
     add("chain not shipped, new process, verdict on disk", on_disk, computed)
     _forget_verdicts(cache)
@@ -198,6 +239,76 @@ def _stability_rows(cache: Path) -> list[dict[str, Any]]:
         f.unlink()
     cold = _check_process(cache, NOT_SHIPPED, runs=False)
     add("chain not shipped, no verdict, step map not compiled", cold[:1], computed[:1])
+    return rows
+
+
+FIRST_RUN_REPS = 15
+_FIRST_RUN_CODE = textwrap.dedent(
+    """
+    import json, time
+    from instruments.burst import Burst
+    from sim_backend import dem
+    from sim_backend.dem.simulation import block_modes
+    chain = dem.build_chain(dem.load_chain_with_settings(None, {settings!r}))
+    block_modes(chain)
+    d = dem.Drive("ltr", "displacement", {amplitude!r}, burst=Burst(8.92e3))
+    walls = []
+    for _ in range(2):
+        t0 = time.perf_counter()
+        dem.simulate(chain, [d], duration_s={duration!r}, sample_rate_Hz={rate!r},
+                     error_estimate=True)
+        walls.append(time.perf_counter() - t0)
+    print(json.dumps({{"first_s": walls[0], "run_s": walls[1]}}))
+    """
+)
+
+
+def _first_run_rows(cache: Path) -> list[dict[str, Any]]:
+    """What the check adds to a fresh process's first ``simulate`` (module docstring); the kernel
+    and the step map are compiled in ``cache`` already."""
+    import statistics
+
+    code = _FIRST_RUN_CODE.format(settings=NOT_SHIPPED, amplitude=SMOKE_KEYS_M[0],
+                                  duration=DEM_DURATION_S, rate=SMOKE_RATE_HZ)  # fmt: skip
+    got: dict[str, list[dict[str, float]]] = {
+        "check computed": [],
+        "verdict read from the cache": [],
+    }
+    load = _load()
+    for _ in range(FIRST_RUN_REPS):
+        for label in got:
+            if label == "check computed":
+                _forget_verdicts(cache)
+            out = subprocess.run(
+                [sys.executable, "-c", code], env=_check_env(cache), capture_output=True,
+                text=True, check=True, timeout=600,
+            )  # fmt: skip
+            got[label].append(json.loads(out.stdout.strip().splitlines()[-1]))
+    med = {
+        label: {k: statistics.median(r[k] for r in rows) for k in ("first_s", "run_s")}
+        for label, rows in got.items()
+    }
+    rows = [
+        {
+            "what": f"fresh process, first simulate (kernel load + check + run), {label}",
+            "first_simulate_s": m["first_s"],
+            "run_s": m["run_s"],
+            "reps": FIRST_RUN_REPS,
+            "load_1min": load,
+        }
+        for label, m in med.items()
+    ]
+    added = med["check computed"]["first_s"] - med["verdict read from the cache"]["first_s"]
+    rows.append(
+        {
+            "what": "what the check adds to a fresh process's first simulate (difference of "
+            "the medians, the kernel's load in both)",
+            "check_s": added,
+            "check_of_first_simulate": added / med["verdict read from the cache"]["first_s"],
+            "check_of_run": added / med["verdict read from the cache"]["run_s"],
+            "load_1min": _load(),
+        }
+    )
     return rows
 
 
@@ -235,6 +346,7 @@ def run() -> dict[str, Any]:
     table += _build_chain_rows()
     with tempfile.TemporaryDirectory(prefix="biafc-setup-") as tmp:
         table += _stability_rows(Path(tmp) / "cache")
+        table += _first_run_rows(Path(tmp) / "cache")
         smoke_cache = Path(tmp) / "smoke-cache"
         cold = _smoke(smoke_cache, Path(tmp) / "cold.h5", "cold (empty cache folder)")
         warm = _smoke(smoke_cache, Path(tmp) / "warm.h5", "warm (the same folder again)")
@@ -261,6 +373,15 @@ def run() -> dict[str, Any]:
         "stability_later_keys_max_of_run": max(r["check_of_run"] for r in later),
         "stability_on_disk_max_of_run": max(r["check_of_run"] for r in on_disk),
         "stability_step_map_compile_s": cold_compile["check_s"],
+        "first_simulate_check_computed_s": rows("first simulate (kernel", "check computed")[0][
+            "first_simulate_s"
+        ],
+        "first_simulate_verdict_cached_s": rows("first simulate (kernel", "read from the cache")[0][
+            "first_simulate_s"
+        ],
+        "check_added_to_first_simulate_s": rows("what the check adds")[0]["check_s"],
+        "check_added_of_first_simulate": rows("what the check adds")[0]["check_of_first_simulate"],
+        "check_added_of_run": rows("what the check adds")[0]["check_of_run"],
         "smoke_cold_first_point_s": cold["first_point_s"],
         "smoke_cold_s": cold["total_s"],
         "smoke_warm_first_point_s": warm["first_point_s"],
