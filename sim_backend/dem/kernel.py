@@ -142,6 +142,23 @@ def _burst(tau: float, prm: NDArray[np.float64], r: int) -> tuple[float, float]:
     return amp * env * cs, amp * (denv * cs - env * om * sn)
 
 
+@numba.njit(inline="always")
+def _drive_on(
+    t: float, src: int, amp: float, delay: float, T: float, rate: float, n_table: int
+) -> bool:
+    """Whether :func:`drive_value` computes the drive at ``t`` (s) rather than returning 0: a
+    nonzero amplitude, and ``t`` inside the burst's window or the table. Numbers only: a helper
+    that numba inlines is cheap only without arrays (it reference-counts those at every call),
+    and the kernel asks this for every lane and sample."""
+    if amp == 0.0:
+        return False
+    tau = t - delay
+    if src == 0:
+        return not (tau <= 0.0 or tau >= T)
+    xs = tau * rate
+    return not (xs < 0.0 or xs >= n_table - 1)
+
+
 @numba.njit(cache=True)
 def drive_value(
     t: float,
@@ -160,18 +177,13 @@ def drive_value(
     linear.
     """
     amp = prm[r, 0]
-    if amp == 0.0:
+    if not _drive_on(t, src[r], amp, prm[r, 6], prm[r, 2], prm[r, 7], n_table[r]):
         return 0.0, 0.0
     tau = t - prm[r, 6]
     if src[r] == 0:
-        T = prm[r, 2]
-        if tau <= 0.0 or tau >= T:
-            return 0.0, 0.0
         return _burst(tau, prm, r)
     rate = prm[r, 7]
     xs = tau * rate
-    if xs < 0.0 or xs >= n_table[r] - 1:
-        return 0.0, 0.0
     j = int(xs)
     fr = xs - j
     a = tables[r, j]
@@ -545,7 +557,9 @@ def run_chunks(
                 for b in range(W):
                     r = lanes[b]
                     if r >= 0:
-                        drv[r, s] = drive_value(t, r, src, prm, tables, n_table)[0]
+                        on = _drive_on(t, src[r], prm[r, 0], prm[r, 6], prm[r, 2], prm[r, 7],
+                                       n_table[r])  # fmt: skip
+                        drv[r, s] = drive_value(t, r, src, prm, tables, n_table)[0] if on else 0.0
             if s == n_samples - 1:
                 break
             if stop_every > 0 and s > 0 and s % stop_every == 0:
