@@ -21,8 +21,9 @@ the caller decides by the eigenvalues.
 Cost on the default chain (n = 31, K = 4, blanes-moan4: 7 drifts, 6 kicks), one thread: a scan of
 8 stiffnesses (blocks and factorisations) 2.2 ms, against 2.7 ms for the blocks here and the
 factorisations in Python (interleaved, fresh processes). One compiled function serves both (one
-cached library to load): compiled on first use (about 2 s) into the user's cache folder like the
-kernel (:mod:`sim_backend.dem.kernel_cache`); a new process loads it in about 5 ms.
+cached library to load): compiled on first use (1.4 s) into the user's cache folder like the
+kernel (:mod:`sim_backend.dem.kernel_cache`); a new process loads it in 5 to 8 ms (2.7 ms of it
+LLVM parsing the library's bitcode), under numba's process-wide compiler lock.
 """
 
 from __future__ import annotations
