@@ -51,9 +51,15 @@ def _run(args: tuple[Any, ...], threads: int) -> tuple[list[np.ndarray], set[int
         a[i] = np.zeros_like(a[i])
     ran: set[int] = set()
     compiled = kernel.run_chunks
+    # each thread's first chunk waits for the other threads' first: on a loaded host one thread
+    # could otherwise take every chunk before the next one starts (not a fault of the kernel);
+    # a kernel that runs fewer threads than asked breaks the barrier (timeout) and fails
+    meet = threading.Barrier(threads, timeout=60.0)
 
     def spy(*b: Any) -> None:
-        ran.add(threading.get_ident())
+        if threading.get_ident() not in ran:
+            ran.add(threading.get_ident())
+            meet.wait()
         compiled(*b)
 
     old = numba.get_num_threads()
