@@ -53,7 +53,9 @@ DEFAULT_COMMANDS: dict[str, str | None] = {
     "max_frequency_get": "Get,VeloDec,1,MaxFreq",
     "signal_delay_get": "Get,VeloDec,1,SignalDelay",
     "low_pass_get": None,  # unconfirmed name: a velocity decoder's output filter, if any
-    "signal_level_get": "Get,SensorHead,0,SignalLevel",  # unconfirmed
+    # unconfirmed: not in the manual's public command list; the form two independent
+    # third-party programs for the OFV-5000 (with a VD-09) use, answered by an integer
+    "signal_level_get": "Get,SignalLevel,0,Value",
     "autofocus_start": "Set,SensorHead,0,AutoFocus,Search",
     "autofocus_result": "Get,SensorHead,0,AutoFocusResult",
 }

@@ -8,7 +8,9 @@ AutoFocusResult ``Found``), ``Interface,0`` (Echo ``On``/``Off``, BaudRate 11520
 velocity decoder ``VeloDec,1`` (Name ``VD-09``, Range ``50mm/s/V``, MaxFreq, SignalDelay).
 With echo on (:attr:`echo`, on by default here: the strict case) every received line is sent
 back before any reply. An item that does not exist answers ``Not Available``.
-The signal level (``Get,SensorHead,0,SignalLevel``, 0..100) is this emulator's assumption.
+The signal level is ``Get,SignalLevel,0,Value``, an integer: the device ``SignalLevel`` is not in
+the manual's public command list; this is the form two independent third-party programs for an
+OFV-5000 with a VD-09 read. Its scale (0..100 here) is this emulator's assumption.
 
 State for the world: :attr:`range_name` (``"VD-09 50mm/s/V"``), :attr:`delay_s`,
 :meth:`sensitivity_m_per_s_per_V`, :attr:`signal_level` (0..1, settable). Faults:
@@ -84,9 +86,9 @@ class PolytecEmulator:
         """The value of one item, None when there is no such item."""
         if device == "Controller" and index == "0":
             return {"Name": self.controller, "Version": "2.4"}.get(item)
+        if device == "SignalLevel" and index == "0":
+            return str(round(self.signal_level * 100)) if item == "Value" else None
         if device == "SensorHead" and index == "0":
-            if item == "SignalLevel":
-                return str(round(self.signal_level * 100))
             return {"Name": self.head, "Version": "1.1", "AutoFocusResult": "Found"}.get(item)
         if device == "Interface" and index == "0":
             return {"Name": "RS-232", "Echo": "On" if self.echo else "Off"}.get(

@@ -83,7 +83,7 @@ def test_wrong_decoder_and_failed_readback_are_refused() -> None:
 
 def test_signal_level_and_loss() -> None:
     t = ScriptedTransport(
-        [("Get,SensorHead,0,SignalLevel", "85"), ("Get,SensorHead,0,SignalLevel", "3")]
+        [("Get,SignalLevel,0,Value", "85"), ("Get,SignalLevel,0,Value", "3")]
     )
     v = PolytecVibrometer(t)
     assert v.check_signal() == pytest.approx(0.85)
@@ -93,14 +93,14 @@ def test_signal_level_and_loss() -> None:
 
 def test_errors_and_timeouts() -> None:
     t = ScriptedTransport(
-        [("Get,VeloDec,1,Range", "Not Available"), ("Get,SensorHead,0,SignalLevel", None)],
+        [("Get,VeloDec,1,Range", "Not Available"), ("Get,SignalLevel,0,Value", None)],
         name="vibrometer",
     )
     v = PolytecVibrometer(t)
     with pytest.raises(ReplyError, match="answered 'Not Available'"):
         v.sensitivity_m_per_s_per_V()
     with pytest.raises(
-        InstrumentTimeout, match="vibrometer: no reply to 'Get,SensorHead,0,SignalLevel'"
+        InstrumentTimeout, match="vibrometer: no reply to 'Get,SignalLevel,0,Value'"
     ):
         v.signal_level()
     with pytest.raises(ReplyError):
