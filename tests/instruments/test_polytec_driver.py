@@ -82,9 +82,7 @@ def test_wrong_decoder_and_failed_readback_are_refused() -> None:
 
 
 def test_signal_level_and_loss() -> None:
-    t = ScriptedTransport(
-        [("Get,SignalLevel,0,Value", "85"), ("Get,SignalLevel,0,Value", "3")]
-    )
+    t = ScriptedTransport([("Get,SignalLevel,0,Value", "85"), ("Get,SignalLevel,0,Value", "3")])
     v = PolytecVibrometer(t)
     assert v.check_signal() == pytest.approx(0.85)
     with pytest.raises(SignalLostError, match=r"signal level 0\.03 below 0\.20"):
