@@ -105,18 +105,23 @@ def retry_bound_available() -> bool:
     return _set_attempts() is not None
 
 
+def _file_access() -> Any:
+    """A file-access property list as h5py makes one for ``h5py.File(..., "r")``."""
+    fapl = h5py.h5p.create(h5py.h5p.FILE_ACCESS)
+    fapl.set_libver_bounds(h5py.h5f.LIBVER_EARLIEST, h5py.h5f.LIBVER_LATEST)
+    return fapl
+
+
 def open_swmr(path: str | Path) -> h5py.File:
     """``h5py.File(path, "r", swmr=True)`` with :data:`METADATA_READ_ATTEMPTS` tries of a
     metadata read that fails its checksum (see the module); raises as h5py does."""
-    fapl = h5py.h5p.create(h5py.h5p.FILE_ACCESS)
-    fapl.set_libver_bounds(h5py.h5f.LIBVER_EARLIEST, h5py.h5f.LIBVER_LATEST)
+    fapl = _file_access()
     fn = _set_attempts()
     if fn is not None:
         with _hdf5_lock:
             failed = fn(fapl.id, METADATA_READ_ATTEMPTS) < 0
         if failed:
-            fapl = h5py.h5p.create(h5py.h5p.FILE_ACCESS)  # left as h5py makes it
-            fapl.set_libver_bounds(h5py.h5f.LIBVER_EARLIEST, h5py.h5f.LIBVER_LATEST)
+            fapl = _file_access()  # left as h5py makes it
     name = str(path).encode(sys.getfilesystemencoding(), "surrogateescape")
     fid = h5py.h5f.open(name, h5py.h5f.ACC_RDONLY | h5py.h5f.ACC_SWMR_READ, fapl=fapl)
     return h5py.File(fid)
