@@ -206,9 +206,8 @@ def drive_piece(
     and slope on that side of its start and end, also at the breakpoint itself."""
     if src[r] != 0 or prm[r, 0] == 0.0:
         return drive_value(t, r, src, prm, tables, n_table)
-    tau_side = side - prm[r, 6]
-    if tau_side <= 0.0 or tau_side >= prm[r, 2]:
-        return 0.0, 0.0
+    if not _drive_on(side, 0, prm[r, 0], prm[r, 6], prm[r, 2], prm[r, 7], n_table[r]):
+        return 0.0, 0.0  # the burst is off on that side
     return _burst(t - prm[r, 6], prm, r)
 
 
