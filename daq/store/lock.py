@@ -44,6 +44,15 @@ __all__ = ["FileInUse", "RunFileLock", "in_use_by", "lock_path", "read_lock"]
 UNREADABLE_GRACE_S = 2.0
 
 
+def _write_synced(fd: int, content: bytes) -> None:
+    """Write ``content`` to ``fd``, sync it to disk and close it (a power cut leaves a whole lock
+    or none)."""
+    with os.fdopen(fd, "wb") as f:
+        f.write(content)
+        f.flush()
+        os.fsync(f.fileno())
+
+
 class FileInUse(RuntimeError):
     """Another live process writes the run file (one line, names it)."""
 
@@ -141,12 +150,8 @@ class RunFileLock:
     def _publish(self, content: bytes) -> bool:
         """Create the lock with ``content`` in one step; False when the name is taken."""
         tmp = self.lock.with_name(f".{self.lock.name}.{os.getpid()}-{os.urandom(4).hex()}.tmp")
-        fd = os.open(tmp, os.O_CREAT | os.O_TRUNC | os.O_WRONLY, 0o644)
         try:
-            with os.fdopen(fd, "wb") as f:
-                f.write(content)
-                f.flush()
-                os.fsync(f.fileno())  # a power cut leaves a whole lock or none
+            _write_synced(os.open(tmp, os.O_CREAT | os.O_TRUNC | os.O_WRONLY, 0o644), content)
             try:
                 os.link(tmp, self.lock)  # fails if the name exists: one writer wins
                 return True
@@ -162,10 +167,7 @@ class RunFileLock:
             fd = os.open(self.lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
         except FileExistsError:
             return False
-        with os.fdopen(fd, "wb") as f:
-            f.write(content)
-            f.flush()
-            os.fsync(f.fileno())
+        _write_synced(fd, content)
         return True
 
     def _remove_dead_temps(self) -> None:
