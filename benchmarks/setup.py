@@ -101,11 +101,7 @@ def _build_chain_rows() -> list[dict[str, Any]]:
                 env.pop(var, None)
                 if threads == "1":
                     env[var] = "1"
-            out = subprocess.run(
-                [sys.executable, "-c", _BUILD_CODE.format(builds=BUILDS)],
-                env=env, capture_output=True, text=True, check=True, timeout=600,
-            )  # fmt: skip
-            got = json.loads(out.stdout.strip().splitlines()[-1])
+            got = _json_from(_BUILD_CODE.format(builds=BUILDS), env)
             walls = sorted(got["walls"])
             rows.append(
                 {
@@ -158,6 +154,15 @@ _CHECK_CODE = textwrap.dedent(
 NOT_SHIPPED = ["preload=6 N"]  # the default chain with one setting changed: not in the table
 
 
+def _json_from(code: str, env: dict[str, str]) -> Any:
+    """The JSON that a fresh ``python -c code`` process prints on its last line."""
+    out = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True,
+        timeout=600,
+    )  # fmt: skip
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
 def _check_env(cache: Path) -> dict[str, str]:
     """A subprocess's environment: ``cache`` as the user cache folder, numba's own cache
     settings and ``PYTHONDONTWRITEBYTECODE`` dropped (module docstring)."""
@@ -170,14 +175,9 @@ def _check_env(cache: Path) -> dict[str, str]:
 def _check_process(cache: Path, settings: list[str], runs: bool) -> list[dict[str, Any]]:
     """One fresh process checking the keys (and timing their runs) with ``cache`` as the user
     cache folder."""
-    env = _check_env(cache)
     code = _CHECK_CODE.format(settings=settings, rate=SMOKE_RATE_HZ, amplitudes=list(SMOKE_KEYS_M),
                               runs=runs, duration=DEM_DURATION_S)  # fmt: skip
-    out = subprocess.run(
-        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True,
-        timeout=600,
-    )  # fmt: skip
-    rows: list[dict[str, Any]] = json.loads(out.stdout.strip().splitlines()[-1])
+    rows: list[dict[str, Any]] = _json_from(code, _check_env(cache))
     return rows
 
 
@@ -279,11 +279,7 @@ def _first_run_rows(cache: Path) -> list[dict[str, Any]]:
         for label in got:
             if label == "check computed":
                 _forget_verdicts(cache)
-            out = subprocess.run(
-                [sys.executable, "-c", code], env=_check_env(cache), capture_output=True,
-                text=True, check=True, timeout=600,
-            )  # fmt: skip
-            got[label].append(json.loads(out.stdout.strip().splitlines()[-1]))
+            got[label].append(_json_from(code, _check_env(cache)))
     med = {
         label: {k: statistics.median(r[k] for r in rows) for k in ("first_s", "run_s")}
         for label, rows in got.items()
