@@ -78,7 +78,9 @@ __all__ = [
     "RunFileWriter",
     "ScanData",
     "ScanSpec",
+    "one_line_errors",
     "open_for_reading",
+    "read_open_run",
     "read_run",
     "software_version",
     "stored_texts",
@@ -532,10 +534,16 @@ def _check_format(path: Path) -> None:
         raise FileNotFoundError(f"run file {path} does not exist")
     try:
         with open_for_reading(path) as f:
-            fmt = f.attrs.get("format")
-            ver = f.attrs.get("format_version")
+            _check_open_format(path, f)
     except (OSError, RuntimeError, KeyError) as exc:
         raise RunFileError(_damaged(path, exc)) from None
+
+
+def _check_open_format(path: Path, f: h5py.File) -> None:
+    """Refuse (:class:`RunFileError`) the open file ``f`` unless it is a run file of
+    :data:`FORMAT_VERSION`; h5py's errors reading its attributes pass."""
+    fmt = f.attrs.get("format")
+    ver = f.attrs.get("format_version")
     if fmt != FORMAT:
         raise RunFileError(f"{path} is not a biafc run file (format={fmt!r})")
     if int(ver) != FORMAT_VERSION:
@@ -561,24 +569,49 @@ def _opt(value: Any) -> float | None:
 def stored_texts(path: str | Path) -> tuple[str, str]:
     """``(protocol_yaml, bench_yaml)``: the texts a run file was started with."""
     path = Path(path)
-    _check_format(path)
-    with open_for_reading(path) as f:
-        texts = [f.attrs.get(k, "") for k in ("protocol_yaml", "bench_yaml")]
+    if not path.exists():
+        raise FileNotFoundError(f"run file {path} does not exist")
+    try:
+        with open_for_reading(path) as f:  # one open: a damaged file waits its grace once
+            _check_open_format(path, f)
+            texts = [f.attrs.get(k, "") for k in ("protocol_yaml", "bench_yaml")]
+    except (OSError, RuntimeError, KeyError) as exc:
+        raise RunFileError(_damaged(path, exc)) from None
     p, b = (t.decode() if isinstance(t, bytes) else str(t) for t in texts)
     return p, b
 
 
 def read_run(path: str | Path) -> RunData:
-    """Read a whole run file (also one still being written, through SWMR). A file that is no
-    run file, or one damaged inside, is a :class:`RunFileError` (one line)."""
+    """Read a whole run file (also one still being written, through SWMR), opening it once. A
+    missing file is a :class:`FileNotFoundError`; a file that is no run file, or one damaged
+    inside, is a :class:`RunFileError` (one line)."""
     path = Path(path)
-    _check_format(path)
+    if not path.exists():
+        raise FileNotFoundError(f"run file {path} does not exist")
+    with one_line_errors(path):
+        with open_for_reading(path) as f:
+            return read_open_run(path, f)
+
+
+@contextmanager
+def one_line_errors(path: Path, passing: tuple[type[Exception], ...] = ()) -> Iterator[None]:
+    """h5py's errors of a file damaged inside (raised while opening or reading ``path``)
+    become a :class:`RunFileError` naming it (one line); a ``RunFileError``, and the one-line
+    errors of the classes in ``passing``, pass as they are."""
     try:
-        return _read_run(path)
+        yield
     except (OSError, RuntimeError, KeyError, ValueError, TypeError) as exc:
-        if isinstance(exc, RunFileError):
+        if isinstance(exc, (RunFileError, *passing)):
             raise
         raise RunFileError(_damaged(path, exc)) from None
+
+
+def read_open_run(path: Path, f: h5py.File) -> RunData:
+    """The whole run file ``path`` from ``f``, its handle from :func:`open_for_reading`: the
+    format checked (:class:`RunFileError`), then every dataset read; h5py's errors of a
+    damaged file pass (:func:`one_line_errors` makes them one line)."""
+    _check_open_format(path, f)
+    return _read_run(path, f)
 
 
 def _damaged(path: Path, exc: BaseException) -> str:
@@ -586,53 +619,52 @@ def _damaged(path: Path, exc: BaseException) -> str:
     return f"{path}: damaged HDF5 file, cannot be read ({why})"
 
 
-def _read_run(path: Path) -> RunData:
-    with open_for_reading(path) as f:
-        attrs = _attr_dict(f)
-        snapshot = json.loads(f["snapshot"].attrs.get("json", "{}"))
-        c = f["chain"]
-        chain = ChainInfo(
-            lengths_m=c["lengths_m"][...],
-            diameter_m=float(c.attrs["diameter_m"]),
-            f0_N=float(c.attrs["f0_N"]),
-            beta_c=float(c.attrs["beta_c"]),
-            onset_Hz=c["onset_Hz"][...],
-            cutoff_Hz=c["cutoff_Hz"][...],
-        )
-        scans: dict[str, ScanData] = {}
-        for direction in DIRECTIONS:
-            if direction not in f["scan"]:
-                continue
-            g = f["scan"][direction]
-            if f.swmr_mode:
-                for name in ("velocity", "drive", "done", "measured_at"):
-                    g[name].refresh()
-            scans[direction] = ScanData(
-                direction=direction,
-                amplitudes=g["amplitudes"][...],
-                amplitude_units=str(g["amplitudes"].attrs.get("units", "")),
-                cylinders=g["cylinders"][...],
-                time_s=g["time"][...],
-                velocity=g["velocity"][...],
-                drive=g["drive"][...],
-                drive_units=str(g["drive"].attrs.get("units", "")),
-                done=g["done"][...],
-                measured_at=g["measured_at"][...],
-                f_center_Hz=float(g.attrs["f_center_Hz"]),
-                cycles=_opt(g.attrs.get("cycles", np.nan)),
-                width_s=_opt(g.attrs.get("width_s", np.nan)),
-                averages=int(g.attrs.get("averages", 1)),
-            )
-        log_ds = f["log"]
+def _read_run(path: Path, f: h5py.File) -> RunData:
+    attrs = _attr_dict(f)
+    snapshot = json.loads(f["snapshot"].attrs.get("json", "{}"))
+    c = f["chain"]
+    chain = ChainInfo(
+        lengths_m=c["lengths_m"][...],
+        diameter_m=float(c.attrs["diameter_m"]),
+        f0_N=float(c.attrs["f0_N"]),
+        beta_c=float(c.attrs["beta_c"]),
+        onset_Hz=c["onset_Hz"][...],
+        cutoff_Hz=c["cutoff_Hz"][...],
+    )
+    scans: dict[str, ScanData] = {}
+    for direction in DIRECTIONS:
+        if direction not in f["scan"]:
+            continue
+        g = f["scan"][direction]
         if f.swmr_mode:
-            log_ds.refresh()
-        log = [
-            (
-                float(r["time"]),
-                r["level"].decode() if isinstance(r["level"], bytes) else str(r["level"]),
-                r["message"].decode() if isinstance(r["message"], bytes) else str(r["message"]),
-            )
-            for r in log_ds[...]
-        ]
-        simulation = _attr_dict(f["simulation"]) if "simulation" in f else {}
+            for name in ("velocity", "drive", "done", "measured_at"):
+                g[name].refresh()
+        scans[direction] = ScanData(
+            direction=direction,
+            amplitudes=g["amplitudes"][...],
+            amplitude_units=str(g["amplitudes"].attrs.get("units", "")),
+            cylinders=g["cylinders"][...],
+            time_s=g["time"][...],
+            velocity=g["velocity"][...],
+            drive=g["drive"][...],
+            drive_units=str(g["drive"].attrs.get("units", "")),
+            done=g["done"][...],
+            measured_at=g["measured_at"][...],
+            f_center_Hz=float(g.attrs["f_center_Hz"]),
+            cycles=_opt(g.attrs.get("cycles", np.nan)),
+            width_s=_opt(g.attrs.get("width_s", np.nan)),
+            averages=int(g.attrs.get("averages", 1)),
+        )
+    log_ds = f["log"]
+    if f.swmr_mode:
+        log_ds.refresh()
+    log = [
+        (
+            float(r["time"]),
+            r["level"].decode() if isinstance(r["level"], bytes) else str(r["level"]),
+            r["message"].decode() if isinstance(r["message"], bytes) else str(r["message"]),
+        )
+        for r in log_ds[...]
+    ]
+    simulation = _attr_dict(f["simulation"]) if "simulation" in f else {}
     return RunData(path, attrs, snapshot, chain, scans, log, simulation)

@@ -42,7 +42,15 @@ from numpy.typing import NDArray
 
 from protocols.study import METRICS, PARAMETERS, CellTable
 
-__all__ = ["FORMAT", "StudyData", "StudyFileError", "StudyStore", "is_study_file", "read_study"]
+__all__ = [
+    "FORMAT",
+    "StudyData",
+    "StudyFileError",
+    "StudyStore",
+    "is_study_file",
+    "read_open_study",
+    "read_study",
+]
 
 FORMAT = "biafc-study"
 FORMAT_VERSION = 1
@@ -304,8 +312,21 @@ def read_study(path: str | Path, *, spectra: bool = True) -> StudyData:
         with open_for_reading(p) as f:  # also one being written, or left by a killed writer
             return _read_study(p, f, spectra)
     except (OSError, RunFileError) as exc:
-        why = (str(exc).splitlines() or [type(exc).__name__])[0]
-        raise StudyFileError(f"{p}: cannot read ({why})") from None
+        raise _unreadable(p, exc) from None
+
+
+def read_open_study(path: Path, f: h5py.File, *, spectra: bool = True) -> StudyData:
+    """The whole study output ``path`` from ``f``, its handle from
+    :func:`protocols.runfile.open_for_reading`, as :func:`read_study`."""
+    try:
+        return _read_study(path, f, spectra)
+    except OSError as exc:
+        raise _unreadable(path, exc) from None
+
+
+def _unreadable(path: Path, exc: BaseException) -> StudyFileError:
+    why = (str(exc).splitlines() or [type(exc).__name__])[0]
+    return StudyFileError(f"{path}: cannot read ({why})")
 
 
 def _read_study(p: Path, f: h5py.File, spectra: bool) -> StudyData:

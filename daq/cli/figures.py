@@ -22,8 +22,12 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from daq.cli.biafc import CliError
+
+if TYPE_CHECKING:
+    from protocols.studyfile import StudyData
 
 __all__ = ["add_arguments", "run"]
 
@@ -134,18 +138,19 @@ def run(args: argparse.Namespace) -> int:
         if getattr(args, name) is not None:
             raise CliError(f"--{name} applies only with --alpha-sweep")
     path: Path = args.run_file
-    from protocols.studyfile import is_study_file
+    from daq.cli.run_input import read_run_or_study
+    from protocols.studyfile import StudyData, StudyFileError
 
-    if is_study_file(path):
-        return _study_figures(args, path)
-    for name in ("x", "y", "metric", "target"):
-        if getattr(args, name) is not None:
-            raise CliError(f"--{name} applies only to a study output")
-    if args.fix or args.where:
-        raise CliError("--fix and --where apply only to a study output")
-    from daq.cli.run_input import read_run_file
-
-    data = read_run_file(path)  # before matplotlib is imported: a refusal comes at once
+    try:  # one open of the file, before matplotlib is imported: a refusal comes at once
+        data = read_run_or_study(path)
+    except StudyFileError as exc:
+        raise CliError(str(exc)) from None
+    except CliError:
+        _refuse_study_options(args)  # named first, as for any file that is no study output
+        raise
+    if isinstance(data, StudyData):
+        return _study_figures(args, path, data)
+    _refuse_study_options(args)
     from analysis.report import write_figures
 
     out = args.out or path.with_name(f"{path.stem}_figures")
@@ -160,6 +165,15 @@ def run(args: argparse.Namespace) -> int:
         print(f"skipped {name}: {why}")
     print(f"written {report.summary_path}")
     return 0
+
+
+def _refuse_study_options(args: argparse.Namespace) -> None:
+    """Refuse the options that apply only to a study output."""
+    for name in ("x", "y", "metric", "target"):
+        if getattr(args, name) is not None:
+            raise CliError(f"--{name} applies only to a study output")
+    if args.fix or args.where:
+        raise CliError("--fix and --where apply only to a study output")
 
 
 def _parse_fix(items: list[str], amplitude_kind: str) -> dict[str, float]:
@@ -187,7 +201,7 @@ def _parse_fix(items: list[str], amplitude_kind: str) -> dict[str, float]:
     return out
 
 
-def _study_figures(args: argparse.Namespace, path: Path) -> int:
+def _study_figures(args: argparse.Namespace, path: Path, data: StudyData) -> int:
     from analysis.plots.study_plot import plot_phase_map
     from analysis.plots.style import save_figure
     from analysis.study_maps import (
@@ -198,12 +212,7 @@ def _study_figures(args: argparse.Namespace, path: Path) -> int:
         rank_designs,
         varying_parameters,
     )
-    from protocols.studyfile import StudyFileError, read_study
 
-    try:
-        data = read_study(path)
-    except StudyFileError as exc:
-        raise CliError(str(exc)) from None
     out = args.out or path.with_name(f"{path.stem}_figures")
     fixed = _parse_fix(args.fix, str(data.attrs.get("amplitude_kind", "displacement")))
     done = int((data.status != 0).sum())

@@ -23,9 +23,10 @@ import numpy as np
 
 from daq.store.lock import RunFileLock, _alive
 from daq.store.run_store import StoreError
+from protocols.outputfile import read_output
 from protocols.recover import clear_consistency_flags, has_consistency_flags
-from protocols.runfile import PointState, RunFileError, RunFileWriter, read_run
-from protocols.studyfile import is_study_file, read_study
+from protocols.runfile import PointState, RunData, RunFileError, RunFileWriter, read_run
+from protocols.studyfile import StudyData, StudyFileError, read_study
 
 __all__ = ["RepairReport", "repair_run"]
 
@@ -53,7 +54,11 @@ class RepairReport:
 
 
 def _counts(path: Path) -> tuple[int, int, int]:
-    run = read_run(path)
+    return _run_counts(read_run(path))
+
+
+def _run_counts(run: RunData) -> tuple[int, int, int]:
+    """``(measured, failed, pending)`` points of ``run``."""
     done = [s.done for s in run.scans.values()]
     n_done = sum(int(np.sum(d == PointState.DONE)) for d in done)
     n_failed = sum(int(np.sum(d == PointState.FAILED)) for d in done)
@@ -105,13 +110,16 @@ def repair_run(path: str | Path) -> RepairReport:
         raise StoreError(str(exc)) from None
     try:
         actions = [lock.stale_note] if lock.stale_note else []
-        if is_study_file(path):
-            return _repair_study(path, actions)
-        try:
-            before_counts = _counts(path)
-            status_before = read_run(path).status
+        try:  # one open of the file: a damaged one waits its grace once (protocols.outputfile)
+            data = read_output(path, spectra=False)
+        except StudyFileError as exc:
+            raise StoreError(f"{path} is not a readable biafc study output ({exc})") from None
         except (OSError, RunFileError) as exc:
             raise StoreError(f"{path} is not a readable biafc run file ({exc})") from None
+        if isinstance(data, StudyData):
+            return _repair_study(path, data, actions)
+        before_counts = _run_counts(data)
+        status_before = data.status
         if has_consistency_flags(path):
             if clear_consistency_flags(path):
                 actions.append("cleared the open-for-write flags of a killed writer")
@@ -148,24 +156,20 @@ def repair_run(path: str | Path) -> RepairReport:
         lock.release()
 
 
-def _study_counts(path: Path) -> tuple[int, int, int]:
+def _study_counts(data: StudyData) -> tuple[int, int, int]:
+    """``(run, failed, pending)`` cells of ``data``."""
     from analysis.study_cells import STATUS_FAILED
 
-    status = read_study(path, spectra=False).status
+    status = data.status
     n_failed = int(np.sum(status == STATUS_FAILED))
     n_pending = int(np.sum(status == 0))
     return status.size - n_failed - n_pending, n_failed, n_pending
 
 
-def _repair_study(path: Path, actions: list[str]) -> RepairReport:
-    """:func:`repair_run` of a study output (the caller holds its lock)."""
-    from protocols.studyfile import StudyFileError
-
-    try:
-        before_counts = _study_counts(path)
-        status_before = str(read_study(path, spectra=False).attrs.get("status", ""))
-    except (OSError, StudyFileError) as exc:
-        raise StoreError(f"{path} is not a readable biafc study output ({exc})") from None
+def _repair_study(path: Path, data: StudyData, actions: list[str]) -> RepairReport:
+    """:func:`repair_run` of a study output read as ``data`` (the caller holds its lock)."""
+    before_counts = _study_counts(data)
+    status_before = str(data.attrs.get("status", ""))
     if has_consistency_flags(path) and clear_consistency_flags(path):
         actions.append("cleared the open-for-write flags of a killed writer")
     status_after = status_before
@@ -188,7 +192,7 @@ def _repair_study(path: Path, actions: list[str]) -> RepairReport:
     with h5py.File(path, "r") as f:  # what any reader does
         if f.attrs.get("format") != "biafc-study":
             raise StoreError(f"{path}: not readable after the repair")
-    after_counts = _study_counts(path)
+    after_counts = _study_counts(read_study(path, spectra=False))
     if after_counts != before_counts:
         raise StoreError(f"{path}: cells changed during the repair {before_counts}")
     return RepairReport(

@@ -54,16 +54,21 @@ def _free_name(path: Path) -> Path:
     return path.with_name(f"{path.stem}_new{path.suffix or '.h5'}")
 
 
-def _run_status(path: Path) -> str | None:
-    """The ``status`` of a biafc run file, or ``None`` when ``path`` is not one."""
-    from protocols.runfile import FORMAT, open_for_reading
+def _run_status(path: Path, *, resuming: bool = False) -> str | None:
+    """The ``status`` of a biafc run file, or ``None`` when ``path`` is not one. ``resuming``:
+    a file that does not open (truncated, damaged, no HDF5 file) is refused here
+    (:class:`StoreError`, the line ``--resume`` refuses it with later), so the wait before
+    that refusal (up to 0.5 s, :mod:`protocols.outputfile`) is paid once."""
+    from protocols.runfile import FORMAT, RunFileError, one_line_errors, open_for_reading
 
     try:
-        with open_for_reading(path) as f:
+        with one_line_errors(path), open_for_reading(path) as f:  # h5py's errors: one line
             if f.attrs.get("format") != FORMAT:
                 return None
             status = f.attrs.get("status", "")
-    except (OSError, ValueError, KeyError, RuntimeError):  # h5py's errors of a damaged file
+    except RunFileError as exc:
+        if resuming:
+            raise StoreError(f"--resume: {str(exc).splitlines()[0]}") from None
         return None
     return status.decode() if isinstance(status, bytes) else str(status)
 
@@ -76,8 +81,8 @@ def _complete(path: Path) -> str:
 
 
 def check_output_path(path: Path, *, resume: bool = False) -> None:
-    """Refuse a path that cannot take a new run (or, resuming, a missing or complete file);
-    each message says what to do instead."""
+    """Refuse a path that cannot take a new run (or, resuming, a missing, unreadable or
+    complete file); each message says what to do instead."""
     if resume:
         if path.is_dir():
             raise StoreError(f"--resume: {path} is a folder; give the run file to continue")
@@ -85,7 +90,7 @@ def check_output_path(path: Path, *, resume: bool = False) -> None:
             raise StoreError(f"--resume: {path} does not exist")
         if not os.access(path, os.W_OK):
             raise StoreError(f"--resume: {path} is not writable")
-        if _run_status(path) == "complete":
+        if _run_status(path, resuming=True) == "complete":
             raise StoreError(_complete(path))
         return
     if path.is_dir():

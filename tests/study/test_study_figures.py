@@ -62,6 +62,25 @@ def test_biafc_figures_draws_a_study(
     assert main(["figures", str(src), "--fix", "amplitude=2V", "--out", str(out)]) == 2
 
 
+def test_biafc_figures_opens_a_study_once(
+    serial_reference: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """One open per command (issue 18): each open of a damaged file waits out its grace
+    before it refuses; asking "is it a study?" first opened the file twice."""
+    import protocols.runfile as runfile
+
+    probes: list[object] = []
+    probe = runfile.probe_hdf5
+    monkeypatch.setattr(runfile, "probe_hdf5", lambda p: probes.append(p) or probe(p))
+    src = tmp_path / "s.h5"
+    shutil.copy(serial_reference, src)
+    argv = ["figures", str(src), "--fix", "amplitude=2um", "--metric", "asymmetry_ratio",
+            "--out", str(tmp_path / "figs")]  # fmt: skip
+    assert main(argv) == 0
+    assert (tmp_path / "figs" / "map_asymmetry_ratio.png").stat().st_size > 0
+    assert probes == [src]  # twice before
+
+
 def test_fig4_from_a_study_over_alpha(tmp_path: Path) -> None:
     text = TINY.replace(
         "  diameter: {from: 12 mm, to: 15 mm, count: 3}\n  preload: [3 N, 6 N]\n",
