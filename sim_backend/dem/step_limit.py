@@ -46,6 +46,12 @@ a reference overlap ``d_ref = max(4 delta0, delta0 + 2 A_disp, ((F0 + 2 A_force)
 ``delta0``; the step must be stable at both. A chain with no contact stiffness at all (preload 0
 and no drive given) has no kick instability: ``h_max = inf``.
 
+The run's check (:func:`check_step`, :func:`stable_up_to`) asks more than one step: that the
+step is stable at every overlap from ``delta0`` up to the run's largest. Inside the small-step
+regime it is answered by a sufficient condition computed from half a step, with no eigenvalues and
+no compiled code (:mod:`sim_backend.dem.stability_certificate`); the grid scan of the compiled
+test is the fallback.
+
 Long chains (N (J+1) > 256) are checked on windows of 32 cylinders whose end contacts hold fixed
 neighbours (the stiffest boundary): the first and last windows and those around the stiffest block
 mode and the lightest primary mass.
@@ -54,21 +60,20 @@ mode and the lightest primary mass.
 from __future__ import annotations
 
 import hashlib
-import json
 import math
-import os
 import threading
 from collections.abc import Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from sim_backend.dem import verdict_store
 from sim_backend.dem.chain import Chain
 from sim_backend.dem.drive import Drive
 from sim_backend.dem.kernel import drift_coefficients
+from sim_backend.dem.stability_certificate import certified
 from sim_backend.dem.threads import one_blas_thread
 
 __all__ = [
@@ -486,6 +491,12 @@ def largest_stable_step(
     return lim
 
 
+#: the certificate stands for every overlap below the one certified only for steps up to this
+#: fraction of the small-step regime (``h w_top <= CERTIFIED_STEP_FRACTION pi``): nearer its
+#: edge the stable overlaps of a graded chain need not form an interval (measured:
+#: :mod:`sim_backend.dem.stability_certificate`), and the grid scan decides
+CERTIFIED_STEP_FRACTION = 0.9
+
 #: overlaps of the stability range scan: ``delta0 * RANGE_RATIO^n`` (stiffness ratio 1.118)
 RANGE_RATIO = 1.25
 
@@ -513,44 +524,53 @@ def range_key(chain: Chain, integrator: str, h: float) -> str:
     return hashlib.sha1(text.encode()).hexdigest()
 
 
-def _disk_path() -> Path:
-    from sim_backend.dem.user_cache import cache_dir
-
-    return cache_dir() / "step-stability.json"
-
-
 def _disk_load(key: str) -> _RangeVerdict | None:
+    """The verdict of ``key`` in the user's cache folder (:mod:`sim_backend.dem.verdict_store`)."""
+    entry = verdict_store.load(key)
     try:
-        entry = json.loads(_disk_path().read_text()).get(key)
         if entry is None:
             return None
         return _RangeVerdict(float(entry[0]), float(entry[1]), float(entry[2]), 0)
-    except (OSError, ValueError, TypeError, IndexError, AttributeError):
+    except (ValueError, TypeError, IndexError):
         return None
 
 
 def _disk_store(key: str, v: _RangeVerdict) -> None:
-    """Merge one verdict into the cache file (best effort: a read-only cache is no error)."""
-    path = _disk_path()
-    try:
-        try:
-            data = json.loads(path.read_text())
-            if not isinstance(data, dict) or len(data) > 4096:
-                data = {}
-        except (OSError, ValueError):
-            data = {}
-        data[key] = [v.start_m, v.stable_to_m, v.unstable_at_m if math.isfinite(v.unstable_at_m)
-                     else "inf"]  # fmt: skip
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(f".{os.getpid()}.tmp")
-        tmp.write_text(json.dumps(data))
-        os.replace(tmp, path)
-    except OSError:
-        pass
+    """Keep ``v`` in the user's cache folder (in the background; best effort)."""
+    unstable: float | str = v.unstable_at_m if math.isfinite(v.unstable_at_m) else "inf"
+    verdict_store.store(key, [v.start_m, v.stable_to_m, unstable])
 
 
 def _start_m(chain: Chain, overlap_m: float) -> float:
     return chain.delta0_m if chain.delta0_m > 0 else overlap_m / RANGE_RATIO**8
+
+
+def _grid_at_or_above(start_m: float, overlap_m: float) -> float:
+    """The first grid overlap ``start_m RANGE_RATIO^n`` (m) at or above ``overlap_m`` (m), by the
+    same products as :func:`_extend`'s grid, so that the two agree to the bit."""
+    d = start_m
+    while d < overlap_m:
+        d *= RANGE_RATIO
+    return d
+
+
+def _certified(chain: Chain, integrator: str, h: float, overlap_m: float) -> bool:
+    """Whether step ``h`` (s) is certified stable with the contacts linearised at ``overlap_m``
+    (m) on every checked window (:mod:`sim_backend.dem.stability_certificate`; palindromic
+    splittings only), and so at every smaller overlap: a certificate, not a verdict (``False``
+    means the grid must decide)."""
+    if not _palindromic(integrator):
+        return False
+    from sim_backend.dem.simulation import INTEGRATORS, block_modes
+
+    if h * float(block_modes(chain).omega.max()) > CERTIFIED_STEP_FRACTION * math.pi:
+        return False  # near the regime's edge: the grid decides (CERTIFIED_STEP_FRACTION)
+    _, a_w, b_w = INTEGRATORS[integrator]
+    k = contact_stiffness_N_per_m(chain, overlap_m)
+    with one_blas_thread():
+        return all(
+            certified(w.phi, w.omega, w.left, w.right, a_w, b_w, h, k) for w in _windows(chain)
+        )
 
 
 def _extend(v: _RangeVerdict, chain: Chain, integrator: str, h: float, overlap_m: float) -> bool:
@@ -623,16 +643,13 @@ class ScanAhead:
     :func:`stable_up_to` keeps them, so the caller's own :func:`check_step` afterwards is served
     from memory (and refuses an unstable step there, as always).
 
-    The compiled scan is loaded (or compiled) here, in the caller's thread, before the thread
-    starts: numba loads compiled code under one process-wide lock, which the kernel's load holds
-    for about 0.2 s; the scan's arithmetic itself runs without the GIL."""
+    A scan is usually one stability certificate (numpy and LAPACK, no compiled code); the compiled
+    scan (:mod:`sim_backend.dem.step_map`) is loaded only when the certificate does not hold, and
+    then waits for the kernel's load (numba loads compiled code under one process-wide lock)."""
 
     def __init__(
         self, chain: Chain, integrator: str, steps: Sequence[float], overlap_m: float
     ) -> None:
-        from sim_backend.dem.step_map import warm_up
-
-        warm_up()
         self._error: BaseException | None = None
         self._thread = threading.Thread(
             target=self._run,
@@ -662,15 +679,22 @@ class ScanAhead:
 
 def stable_up_to(chain: Chain, integrator: str, h: float, overlap_m: float) -> bool:
     """Whether step ``h`` (s) is linearly stable for every contact overlap from ``delta0`` up to
-    ``overlap_m`` (m), checked on the grid ``delta0 RANGE_RATIO^n`` and at the grid point at or
-    above ``overlap_m`` (a run's contacts pass through every overlap up to their peak).
+    ``overlap_m`` (m) (a run's contacts pass through every overlap up to their peak), judged up
+    to ``top``, the grid point ``delta0 RANGE_RATIO^n`` at or above ``overlap_m``.
+
+    First by one stability certificate at ``top`` (:func:`_certified`: half a step's map, two
+    products and two Cholesky factorisations, about 1 ms on the default chain), which holds for
+    every step of the small-step regime of the symmetric splittings and covers every overlap
+    below ``top``; where it does not hold (past the regime, or a splitting that is not
+    symmetric), by the compiled scan of the grid points from ``delta0`` up to ``top``
+    (:func:`_extend`), stopping at the first unstable one. A grid point above ``overlap_m`` that
+    is unstable falls back to the exact two-point check of :func:`is_stable` at ``overlap_m``.
 
     Computed once per (chain, integrator, step): the verdict grows lazily with the largest
     overlap asked for and is kept in memory and in the user's cache folder
-    (``step-stability.json``), so the checks of a protocol's many drives, and of later runs,
-    cost one scan; the shipped chains' verdicts at the shipped protocols' steps come with the
-    package (:mod:`sim_backend.dem.shipped_stability`). A grid point above ``overlap_m`` that is
-    unstable falls back to the exact two-point check of :func:`is_stable` at ``overlap_m``.
+    (:mod:`sim_backend.dem.verdict_store`), so the checks of a protocol's many drives, and of
+    later runs, cost one certificate or scan; the shipped chains' verdicts at the shipped
+    protocols' steps come with the package (:mod:`sim_backend.dem.shipped_stability`).
     """
     key = range_key(chain, integrator, h)
     v = _verdict(key, chain, overlap_m)
@@ -678,6 +702,12 @@ def stable_up_to(chain: Chain, integrator: str, h: float, overlap_m: float) -> b
         return True
     if overlap_m >= v.unstable_at_m:
         return False
+    top = _grid_at_or_above(v.start_m, overlap_m)
+    if top < v.unstable_at_m and _certified(chain, integrator, h, top):
+        v.stable_to_m = top  # every grid point up to ``top`` at once
+        v.evaluations += 1
+        _disk_store(key, v)
+        return True
     if _extend(v, chain, integrator, h, overlap_m):
         _disk_store(key, v)
     if overlap_m <= v.stable_to_m:

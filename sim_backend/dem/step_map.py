@@ -18,6 +18,11 @@ with BLAS ``dgemm`` and LAPACK ``dpotrf`` (scipy's, called through numba's own C
 scan of many stiffnesses has no Python step per stiffness; a failed factorisation is reported and
 the caller decides by the eigenvalues.
 
+A run's check (:func:`sim_backend.dem.step_limit.stable_up_to`) needs this only where the
+stability certificate of half a step (:mod:`sim_backend.dem.stability_certificate`, no compiled
+code) does not hold: near or past the edge of the small-step regime, or for a splitting that is
+not symmetric; :func:`sim_backend.dem.step_limit.largest_stable_step` always uses it.
+
 Cost on the default chain (n = 31, K = 4, blanes-moan4: 7 drifts, 6 kicks), one thread: a scan of
 8 stiffnesses (blocks and factorisations) 2.2 ms, against 2.7 ms for the blocks here and the
 factorisations in Python (interleaved, fresh processes). One compiled function serves both (one

@@ -51,6 +51,13 @@ def fresh(monkeypatch: pytest.MonkeyPatch) -> dict[str, Any]:
         return stable_many(chain, integrator, h, *args, **kw)
 
     monkeypatch.setattr(step_limit, "_stable_many", spy)
+    certified = step_limit._certified
+
+    def certificate_spy(chain: dem.Chain, integrator: str, h: float, overlap: float) -> bool:
+        seen["scans"].append((threading.current_thread() is threading.main_thread(), h))
+        return certified(chain, integrator, h, overlap)
+
+    monkeypatch.setattr(step_limit, "_certified", certificate_spy)
     seen["threads"] = threading.active_count()
     return seen
 
@@ -86,6 +93,7 @@ def test_the_scans_error_reaches_the_caller_and_nothing_runs(
         raise RuntimeError("scan failed")
 
     monkeypatch.setattr(step_limit, "_stable_many", broken)
+    monkeypatch.setattr(step_limit, "_certified", broken)
     with pytest.raises(RuntimeError, match="scan failed"):
         dem.simulate(not_shipped, [_drive(not_shipped)], duration_s=1e-3, dt_s=2e-6)
     assert fresh["kernel"].runs == 0
@@ -145,6 +153,11 @@ def spy(*args, **kw):
     scans.append(threading.current_thread().name)
     return stable_many(*args, **kw)
 step_limit._stable_many = spy
+certified = step_limit._certified
+def certificate_spy(*args):
+    scans.append(threading.current_thread().name)
+    return certified(*args)
+step_limit._certified = certificate_spy
 chain = dem.build_chain(dem.load_chain_with_settings(None, ["preload=6 N"]))
 d = dem.Drive("ltr", "displacement", 0.5 * chain.delta0_m, burst=Burst(8.92e3))
 loaded_before = simulation.kernel_loaded()

@@ -151,7 +151,14 @@ def test_stability_check_runs_once_per_chain_and_step(
         calls.extend(overlaps)
         return stable_many(chain, integrator, h, overlaps)
 
+    certified = step_limit._certified
+
+    def counting_certificates(chain: dem.Chain, integrator: str, h: float, overlap: float) -> bool:
+        calls.append(overlap)
+        return certified(chain, integrator, h, overlap)
+
     monkeypatch.setattr(step_limit, "_stable_many", counting)
+    monkeypatch.setattr(step_limit, "_certified", counting_certificates)
     amplitudes = undamped.delta0_m * np.geomspace(0.05, 3.0, 24)
     drives = [dem.Drive("ltr", "displacement", float(a), burst=Burst(8.92e3)) for a in amplitudes]
     for d in drives:  # one key each, as the simulated bench's DEM runs are

@@ -11,7 +11,7 @@ import pytest
 from instruments.burst import Burst
 from protocols.schema import load_protocol, shipped_protocols
 from sim_backend import dem
-from sim_backend.dem import beam, shipped_stability, step_limit
+from sim_backend.dem import beam, shipped_stability, step_limit, verdict_store
 from sim_backend.dem.spec import benchmark_chain_spec
 
 
@@ -53,7 +53,14 @@ def _count_scans(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> list[float]
         calls.extend(overlaps)
         return stable_many(chain, integrator, h, overlaps)
 
+    certified = step_limit._certified
+
+    def counting_certificates(chain: dem.Chain, integrator: str, h: float, overlap: float) -> bool:
+        calls.append(overlap)
+        return certified(chain, integrator, h, overlap)
+
     monkeypatch.setattr(step_limit, "_stable_many", counting)
+    monkeypatch.setattr(step_limit, "_certified", counting_certificates)
     return calls
 
 
@@ -72,6 +79,7 @@ def test_a_fresh_install_computes_no_verdict_for_a_shipped_chain(
                            error_estimate=True, record=("velocity",))  # fmt: skip
         assert res.meta["error_estimate_method"].startswith("step doubling")
     assert calls == []
+    verdict_store.flush()
     assert not (tmp_path / "step-stability.json").exists()
     other = dem.build_chain(dem.load_chain_with_settings(None, ["preload=6 N"]))
     dem.simulate(other, [drive], duration_s=2e-4, sample_rate_Hz=200e3, error_estimate=True,
