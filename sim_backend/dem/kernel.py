@@ -104,13 +104,12 @@ NUMERICS_VERSION = "3: steps split at the burst ends"
 
 
 def drift_coefficients(
-    omega: NDArray[np.float64], zeta: NDArray[np.float64], h: float | NDArray[np.float64]
+    omega: NDArray[np.float64], zeta: NDArray[np.float64], h: float
 ) -> NDArray[np.float64]:
     """Exact flow of ``q'' + 2 zeta w q' + w^2 q = 0`` over ``h`` s: ``[..., 4]`` = (a, b, c, d)
     with ``q1 = a q0 + b p0``, ``p1 = c q0 + d p0``. ``omega`` (rad/s), ``zeta`` same shape;
-    ``h`` may be negative (backward substeps of high-order compositions), and an array that
-    broadcasts with ``omega`` (several step lengths at once: shape ``broadcast(omega, h)``)."""
-    out = np.empty((*np.broadcast_shapes(np.shape(omega), np.shape(h)), 4))
+    ``h`` may be negative (backward substeps of high-order compositions)."""
+    out = np.empty((*omega.shape, 4))
     w = omega
     rigid = w <= 0.0
     z = np.where(rigid, 0.0, zeta)

@@ -496,6 +496,10 @@ def largest_stable_step(
 #: edge the stable overlaps of a graded chain need not form an interval (measured:
 #: :mod:`sim_backend.dem.stability_certificate`), and the grid scan decides
 CERTIFIED_STEP_FRACTION = 0.9
+#: the certificate is tried first this many grid points above the one a run needs (overlap x 5.96,
+#: stiffness x 2.44), so that a protocol's larger drives find their verdict in memory; where it
+#: does not hold there, at the point needed
+CERTIFIED_AHEAD = 8
 
 #: overlaps of the stability range scan: ``delta0 * RANGE_RATIO^n`` (stiffness ratio 1.118)
 RANGE_RATIO = 1.25
@@ -682,12 +686,13 @@ def stable_up_to(chain: Chain, integrator: str, h: float, overlap_m: float) -> b
     ``overlap_m`` (m) (a run's contacts pass through every overlap up to their peak), judged up
     to ``top``, the grid point ``delta0 RANGE_RATIO^n`` at or above ``overlap_m``.
 
-    First by one stability certificate at ``top`` (:func:`_certified`: half a step's map, two
-    products and two Cholesky factorisations, about 1 ms on the default chain), which holds for
-    every step of the small-step regime of the symmetric splittings and covers every overlap
-    below ``top``; where it does not hold (past the regime, or a splitting that is not
-    symmetric), by the compiled scan of the grid points from ``delta0`` up to ``top``
-    (:func:`_extend`), stopping at the first unstable one. A grid point above ``overlap_m`` that
+    First by one stability certificate (:func:`_certified`: half a step's map, two products and
+    two Cholesky factorisations, under 1 ms on the default chain), which covers every overlap
+    below the one certified: at the grid point ``CERTIFIED_AHEAD`` above ``top`` (so that the
+    larger drives of the same protocol are answered from memory), else at ``top``; where neither
+    holds (near or past the regime's edge, or a splitting that is not symmetric), by the compiled
+    scan of the grid points from ``delta0`` up to ``top`` (:func:`_extend`), stopping at the
+    first unstable one. A grid point above ``overlap_m`` that
     is unstable falls back to the exact two-point check of :func:`is_stable` at ``overlap_m``.
 
     Computed once per (chain, integrator, step): the verdict grows lazily with the largest
@@ -703,11 +708,17 @@ def stable_up_to(chain: Chain, integrator: str, h: float, overlap_m: float) -> b
     if overlap_m >= v.unstable_at_m:
         return False
     top = _grid_at_or_above(v.start_m, overlap_m)
-    if top < v.unstable_at_m and _certified(chain, integrator, h, top):
-        v.stable_to_m = top  # every grid point up to ``top`` at once
+    ahead = top
+    for _ in range(CERTIFIED_AHEAD):
+        ahead *= RANGE_RATIO
+    for d in (ahead, top):
+        if d >= v.unstable_at_m:
+            continue
         v.evaluations += 1
-        _disk_store(key, v)
-        return True
+        if _certified(chain, integrator, h, d):
+            v.stable_to_m = d  # every grid point up to ``d`` at once
+            _disk_store(key, v)
+            return True
     if _extend(v, chain, integrator, h, overlap_m):
         _disk_store(key, v)
     if overlap_m <= v.stable_to_m:

@@ -19,8 +19,9 @@ import pytest
 from instruments.burst import Burst
 from sim_backend import dem
 from sim_backend.dem import step_limit, verdict_store
+from sim_backend.dem.kernel import drift_coefficients
 from sim_backend.dem.simulation import INTEGRATORS, block_modes
-from sim_backend.dem.stability_certificate import certified, half_map, half_stages
+from sim_backend.dem.stability_certificate import _rotations, certified, half_map, half_stages
 from sim_backend.dem.step_map import STABLE, stability_codes
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -58,6 +59,15 @@ def test_the_half_stages_are_half_the_splitting(name: str) -> None:
     assert half == [*whole[:mid], 0.5 * whole[mid]]
     assert math.fsum(drifts) == pytest.approx(0.5, abs=1e-15)
     assert math.fsum(kicks) == pytest.approx(0.5, abs=1e-15)
+
+
+def test_the_drifts_are_the_kernels_undamped_drifts(default: dem.Chain) -> None:
+    om = block_modes(default).omega.ravel()
+    t = np.array([0.3e-6, -1.1e-6, 2.9e-6])
+    got = _rotations(om, t)
+    for i, ti in enumerate(t):
+        ref = drift_coefficients(om, np.zeros_like(om), float(ti))
+        assert np.allclose(got[i], ref, rtol=1e-15, atol=0)
 
 
 def test_a_splitting_that_is_not_palindromic_has_no_half() -> None:
@@ -194,6 +204,15 @@ def test_the_certificate_refuses_a_step_past_the_small_step_regime(default: dem.
     assert not certified(win.phi, win.omega, win.left, win.right, a_w, b_w, 0.0, k)
 
 
+def _wrap(certify: Any, seen: dict[str, list[Any]]) -> Any:
+    def cert(chain: dem.Chain, integrator: str, h: float, overlap: float) -> bool:
+        ok = bool(certify(chain, integrator, h, overlap))
+        seen["certificates"].append((h, overlap, ok))
+        return ok
+
+    return cert
+
+
 def _spy(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> dict[str, list[Any]]:
     """An empty user cache and memory; the certificates and grid scans from now on."""
     monkeypatch.setenv("BIAFC_CACHE_DIR", str(tmp_path))
@@ -203,16 +222,11 @@ def _spy(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> dict[str, list[Any]
     certified_ = step_limit._certified
     stable_many = step_limit._stable_many
 
-    def cert(chain: dem.Chain, integrator: str, h: float, overlap: float) -> bool:
-        ok = certified_(chain, integrator, h, overlap)
-        seen["certificates"].append((h, overlap, ok))
-        return ok
-
     def grid(chain: dem.Chain, integrator: str, h: float, overlaps: Any, **kw: Any) -> list[bool]:
         seen["grid"].extend(overlaps)
         return stable_many(chain, integrator, h, overlaps, **kw)
 
-    monkeypatch.setattr(step_limit, "_certified", cert)
+    monkeypatch.setattr(step_limit, "_certified", _wrap(certified_, seen))
     monkeypatch.setattr(step_limit, "_stable_many", grid)
     return seen
 
@@ -226,19 +240,41 @@ def test_a_chains_first_check_is_one_certificate_and_no_grid(
     step_limit.check_step(chain, "blanes-moan4", 5e-6, [d])
     assert len(seen["certificates"]) == 1 and seen["certificates"][0][2]
     assert seen["grid"] == []
-    # the verdict covers the grid up to the certified point, and lands in the user cache
+    # the verdict covers the grid up to the certified point, CERTIFIED_AHEAD grid points above
+    # the one this drive needs, and lands in the user cache
     key = step_limit.range_key(chain, "blanes-moan4", 5e-6)
     v = step_limit._RANGE_CACHE[key]
-    top = seen["certificates"][0][1]
-    assert v.stable_to_m == top >= step_limit.reference_overlap_m(chain, [d])
-    assert top == step_limit._grid_at_or_above(chain.delta0_m, top)
+    top = step_limit._grid_at_or_above(chain.delta0_m, step_limit.reference_overlap_m(chain, [d]))
+    ahead = top * step_limit.RANGE_RATIO**step_limit.CERTIFIED_AHEAD
+    assert v.stable_to_m == seen["certificates"][0][1] == pytest.approx(ahead, rel=1e-12)
+    assert v.stable_to_m == step_limit._grid_at_or_above(chain.delta0_m, v.stable_to_m)
     verdict_store.flush()
     stored = json.loads((tmp_path / "step-stability.json").read_text())[key]
-    assert stored[1] == top
-    # a smaller drive asks nothing more
-    smaller = dem.Drive("ltr", "displacement", 1e-6, burst=Burst(8.92e3))
-    step_limit.check_step(chain, "blanes-moan4", 5e-6, [smaller])
+    assert stored[1] == v.stable_to_m
+    # a smaller drive, and one three times larger, ask nothing more
+    for a in (1e-6, 9e-6):
+        step_limit.check_step(chain, "blanes-moan4", 5e-6, [dem.Drive("ltr", "displacement", a,
+                              burst=Burst(8.92e3))])  # fmt: skip
     assert len(seen["certificates"]) == 1 and seen["grid"] == []
+
+
+def test_where_the_certificate_fails_ahead_it_is_tried_where_needed(
+    not_shipped: dem.Chain, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    real = step_limit._certified
+    seen = _spy(monkeypatch, tmp_path)
+    need = 4 * not_shipped.delta0_m
+
+    def fails_ahead(chain: dem.Chain, integrator: str, h: float, overlap: float) -> bool:
+        return overlap < 2 * need and real(chain, integrator, h, overlap)
+
+    monkeypatch.setattr(step_limit, "_certified", _wrap(fails_ahead, seen))
+    assert step_limit.stable_up_to(not_shipped, "blanes-moan4", 5e-6, need)
+    assert [ok for _, _, ok in seen["certificates"]] == [False, True]
+    assert seen["grid"] == []
+    top = step_limit._grid_at_or_above(not_shipped.delta0_m, need)
+    assert step_limit._RANGE_CACHE[step_limit.range_key(not_shipped, "blanes-moan4", 5e-6)
+                                   ].stable_to_m == top  # fmt: skip
 
 
 @pytest.mark.parametrize("factor", [1.0, 100.0])
