@@ -22,6 +22,7 @@ from sim_backend.dem.kernel_cache import compile_notice, kernel_loaded
 from sim_backend.dem.step_limit import (
     ScanAhead,
     StepTooLargeError,
+    certificate_applies,
     check_step,
     reference_overlap_m,
     scan_needed,
@@ -240,9 +241,12 @@ def _scan_ahead(
 ) -> ScanAhead | None:
     """The stability scans this call will need (the step ``h`` (s) when ``check_h``, the error
     estimate's ``2h`` when ``check_2h``), started in a background thread when some verdict is
-    not known yet and the kernel is not loaded in this process: the scan then runs while the
-    kernel loads (about 0.25 s from the cache folder), not after it. ``None`` otherwise (the
-    checks run in turn, as they always did)."""
+    not known yet, the kernel is not loaded in this process, and some step needs the compiled
+    grid scan (the certificate does not apply to it: :func:`step_limit.certificate_applies`): the
+    scan then runs while the kernel loads (about 0.25 s from the cache folder), not after it.
+    ``None`` otherwise (the checks run in turn: a certificate costs about a millisecond, and in a
+    thread beside the kernel's load it added 6 ms to the first ``simulate``, 25 interleaved
+    fresh processes)."""
     if not (check_h or check_2h) or kernel_loaded():
         return None
     overlap = reference_overlap_m(chain, drives)
@@ -251,6 +255,8 @@ def _scan_ahead(
         steps.append(steps_per_sample(2.0 * h, sample_rate_Hz / 2.0)[1])
     if not any(scan_needed(chain, name, s, overlap) for s in steps):
         return None
+    if all(certificate_applies(chain, name, s) for s in steps):
+        return None  # a certificate each, in turn: in a thread it would contend for the GIL
     return ScanAhead(chain, name, steps, overlap)
 
 

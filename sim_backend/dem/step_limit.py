@@ -81,6 +81,7 @@ __all__ = [
     "ScanAhead",
     "StepLimit",
     "StepTooLargeError",
+    "certificate_applies",
     "check_step",
     "contact_stiffness_N_per_m",
     "is_stable",
@@ -558,17 +559,26 @@ def _grid_at_or_above(start_m: float, overlap_m: float) -> float:
     return d
 
 
+def certificate_applies(chain: Chain, integrator: str, h: float) -> bool:
+    """Whether the stability certificate is tried for step ``h`` (s) of ``integrator``: a
+    symmetric splitting, and ``h w_top`` at most ``CERTIFIED_STEP_FRACTION pi`` (else the grid
+    scan decides at once)."""
+    from sim_backend.dem.simulation import block_modes
+
+    if not _palindromic(integrator):
+        return False
+    return h * float(block_modes(chain).omega.max()) <= CERTIFIED_STEP_FRACTION * math.pi
+
+
 def _certified(chain: Chain, integrator: str, h: float, overlap_m: float) -> bool:
     """Whether step ``h`` (s) is certified stable with the contacts linearised at ``overlap_m``
     (m) on every checked window (:mod:`sim_backend.dem.stability_certificate`; palindromic
     splittings only), and so at every smaller overlap: a certificate, not a verdict (``False``
     means the grid must decide)."""
-    if not _palindromic(integrator):
+    if not certificate_applies(chain, integrator, h):
         return False
-    from sim_backend.dem.simulation import INTEGRATORS, block_modes
+    from sim_backend.dem.simulation import INTEGRATORS
 
-    if h * float(block_modes(chain).omega.max()) > CERTIFIED_STEP_FRACTION * math.pi:
-        return False  # near the regime's edge: the grid decides (CERTIFIED_STEP_FRACTION)
     _, a_w, b_w = INTEGRATORS[integrator]
     k = contact_stiffness_N_per_m(chain, overlap_m)
     with one_blas_thread():
@@ -647,9 +657,11 @@ class ScanAhead:
     :func:`stable_up_to` keeps them, so the caller's own :func:`check_step` afterwards is served
     from memory (and refuses an unstable step there, as always).
 
-    A scan is usually one stability certificate (numpy and LAPACK, no compiled code); the compiled
-    scan (:mod:`sim_backend.dem.step_map`) is loaded only when the certificate does not hold, and
-    then waits for the kernel's load (numba loads compiled code under one process-wide lock)."""
+    Worth it for the compiled grid scan (:mod:`sim_backend.dem.step_map`), whose arithmetic runs
+    without the GIL; ``simulate`` starts none for a step the certificate answers
+    (:func:`certificate_applies`), which is numpy and Python and would only contend for the GIL
+    with the kernel's load. The scan's compiled code is loaded in this thread, after the kernel's
+    (numba loads compiled code under one process-wide lock)."""
 
     def __init__(
         self, chain: Chain, integrator: str, steps: Sequence[float], overlap_m: float

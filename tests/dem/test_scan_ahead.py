@@ -1,5 +1,6 @@
 """The first ``simulate`` of a process scans the step's stability while the kernel loads
-(``step_limit.ScanAhead``): the step is still refused before any run, the scan's errors reach the
+(``step_limit.ScanAhead``) where the compiled grid scan decides (a step the stability certificate
+answers is checked in turn): the step is still refused before any run, the scan's errors reach the
 caller, no thread is left behind, and the verdicts are the ones the call would have computed."""
 
 from __future__ import annotations
@@ -100,25 +101,47 @@ def test_the_scans_error_reaches_the_caller_and_nothing_runs(
     assert threading.active_count() == fresh["threads"]
 
 
-def test_the_error_estimates_step_is_scanned_ahead_and_served_from_memory(
-    fresh: dict[str, Any], not_shipped: dem.Chain, monkeypatch: pytest.MonkeyPatch
+def test_a_step_the_certificate_answers_is_checked_in_turn(
+    fresh: dict[str, Any], not_shipped: dem.Chain
 ) -> None:
-    """``simulate(..., error_estimate=True)``: the rerun at 2h checks its step; that scan runs
-    while the kernel loads, and the rerun's own check computes nothing. Same result as with the
-    kernel loaded (scans in turn)."""
+    """At the shipped rate the error estimate's step 2h is answered by one certificate, in the
+    caller's thread (a thread beside the kernel's load would only contend for the GIL), and the
+    rerun's own check computes nothing."""
     d = _drive(not_shipped)
     res = dem.simulate(not_shipped, [d], duration_s=2e-3, sample_rate_Hz=200e3,
                        error_estimate=True)  # fmt: skip
     h = res.meta["dt_s"]
-    assert [background for background, _ in fresh["scans"]] == [False]
-    assert fresh["scans"][0][1] == simulation.steps_per_sample(2 * h, 100e3)[1]
+    assert fresh["scans"] == [(True, simulation.steps_per_sample(2 * h, 100e3)[1])]
+    assert fresh["kernel"].runs == 2
+    assert threading.active_count() == fresh["threads"]
+
+
+def test_the_error_estimates_step_is_scanned_ahead_and_served_from_memory(
+    fresh: dict[str, Any], not_shipped: dem.Chain, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``simulate(..., error_estimate=True)`` with a rerun step 2h near the edge of the small-step
+    regime (0.95 pi / w_top, where the grid scan decides): that scan runs while the kernel loads,
+    and the rerun's own check computes nothing. Same result as with the kernel loaded (scans in
+    turn)."""
+    d = _drive(not_shipped)
+    rate = 1 / 5.8e-6
+    kw: dict[str, Any] = dict(duration_s=2e-3, sample_rate_Hz=rate, dt_s=2.9e-6,
+                              error_estimate=True)  # fmt: skip
+    res = dem.simulate(not_shipped, [d], **kw)
+    h = res.meta["dt_s"]
+    h2 = simulation.steps_per_sample(2 * h, rate / 2)[1]
+    assert not step_limit.certificate_applies(not_shipped, "blanes-moan4", h2)
+    assert step_limit.certificate_applies(not_shipped, "blanes-moan4", h)
+    assert all(background is False for background, _ in fresh["scans"])
+    assert [s for _, s in fresh["scans"]][-1] == pytest.approx(h2)
     assert fresh["kernel"].runs == 2  # the run and its rerun at 2h
     assert threading.active_count() == fresh["threads"]
+    scans = len(fresh["scans"])
     step_limit._RANGE_CACHE.clear()
     monkeypatch.setattr(simulation, "kernel_loaded", lambda: True)
-    again = dem.simulate(not_shipped, [d], duration_s=2e-3, sample_rate_Hz=200e3,
-                         error_estimate=True)  # fmt: skip
-    assert fresh["scans"][1][0] is True  # in turn, in the caller's thread
+    again = dem.simulate(not_shipped, [d], **kw)
+    assert len(fresh["scans"]) > scans
+    assert all(background is True for background, _ in fresh["scans"][scans:])  # in turn
     assert np.array_equal(again.velocity, res.velocity)
     assert np.array_equal(again.meta["error_estimate_rel"], res.meta["error_estimate_rel"])
 
