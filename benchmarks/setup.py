@@ -24,8 +24,8 @@
   first ``simulate`` (the chain that does not ship, LTR 0.5 um, 30 ms at 200 kS/s with the
   error estimate, whose rerun at 2h is checked) and then a second one (the run alone); one of
   each pair with no verdict in the user cache (the check is computed: one stability certificate,
-  in turn, after the kernel's load), the other with the verdict on disk. Reported: the medians, their difference
-  and that difference as a fraction of the first ``simulate`` and of the run.
+  in turn, after the kernel's load), the other with the verdict on disk. Reported: the medians,
+  their difference and that difference as a fraction of the first ``simulate`` and of the run.
 - ``run_protocol smoke`` as a subprocess on the simulated bench: cold (an empty cache folder,
   ``$BIAFC_CACHE_DIR``: the kernel compiles) and warm (the same folder again), the time from the
   start of the process to its first measured point (the first ``point 1/`` line) and to its

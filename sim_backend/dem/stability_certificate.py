@@ -232,20 +232,31 @@ def half_map(
     return Q, P
 
 
+@functools.lru_cache(maxsize=32)
+def _gram_index(n: int, W: int, K: int) -> NDArray[np.int64]:
+    """Flat indices [n W K W K] into the padded [(n + W - 1) K]^2 matrix of :func:`_gram`'s
+    blocks: block ``c`` at cylinders ``c .. c + W - 1`` of both sides (read-only, cached)."""
+    Dp = (n + W - 1) * K
+    at = np.arange(n)[:, None] * K + np.arange(W * K)[None, :]  # [n, W K] padded indices
+    idx = (at[:, :, None] * Dp + at[:, None, :]).ravel()
+    idx.setflags(write=False)
+    return idx
+
+
 def _gram(left_cols: NDArray[np.float64], right_cols: NDArray[np.float64]) -> NDArray[np.float64]:
     """``X Y^T`` ([D, D]) of two [D, D] matrices given by their column blocks on the band
     (``left_cols``, ``right_cols``: [n, W, K, K], as :func:`_half_band`'s halves): the sum over the
-    column cylinders ``c`` of a [W K, W K] block at cylinders ``c - s .. c + s``, with no dense
-    [D, 2D] map and no [D, D, D] product."""
+    column cylinders ``c`` of a [W K, W K] block at cylinders ``c - s .. c + s`` (one batched
+    product and one ``bincount``), with no dense [D, 2D] map and no [D, D, D] product."""
     n, W, K, _ = left_cols.shape
     s = (W - 1) // 2
+    Dp = (n + 2 * s) * K  # padded by s cylinders at both ends
     blocks = np.matmul(
         left_cols.reshape(n, W * K, K), right_cols.reshape(n, W * K, K).transpose(0, 2, 1)
     )
-    out = np.zeros(((n + 2 * s) * K, (n + 2 * s) * K))  # padded by s cylinders at both ends
-    for c in range(n):
-        out[c * K : (c + W) * K, c * K : (c + W) * K] += blocks[c]
-    return out[s * K : (s + n) * K, s * K : (s + n) * K]
+    summed = np.bincount(_gram_index(n, W, K), weights=blocks.ravel(), minlength=Dp * Dp)
+    out = np.asarray(summed, dtype=np.float64)  # float64 already (weighted): no copy
+    return out.reshape(Dp, Dp)[s * K : (s + n) * K, s * K : (s + n) * K]
 
 
 def _positive_definite(a: NDArray[np.float64]) -> bool:

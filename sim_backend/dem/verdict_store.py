@@ -4,16 +4,19 @@ One JSON object, key -> entry (:func:`sim_backend.dem.step_limit.range_key` -> `
 stable_to_m, unstable_at_m]``, ``"inf"`` for none). Best effort: a cache folder that cannot be
 read or written is no error, only a verdict computed again.
 
-:func:`store` hands the write to a background thread (a non-daemon one: the interpreter waits for
-it at exit, so a stored verdict is not lost), so the check that computed a verdict does not wait
-for the file: reading, merging and replacing it costs 0.3-0.4 ms, a tenth of a first check. Two
-processes may store at once: each writes its own temporary file and replaces the cache file with
-it (``os.replace``, atomic), so the file is always whole; one of two simultaneous new entries can
-be lost, and is computed again next time.
+:func:`store` keeps a new verdict in memory and the file is written once, when the process ends
+(``atexit``), or when :data:`MAX_PENDING` verdicts wait: reading, merging and replacing the file
+costs 0.2-0.4 ms, a tenth of a first check, and a background thread for it contended for the GIL
+with the check itself. :func:`load` sees this process's pending verdicts as well as the file's. A
+process killed before it ends loses its new verdicts, which the next process computes again (a
+cache, not a record). Two processes may write at once: each writes its own temporary file and
+replaces the cache file with it (``os.replace``, atomic), so the file is always whole; one of two
+simultaneous sets of new entries can be lost, and is computed again next time.
 """
 
 from __future__ import annotations
 
+import atexit
 import json
 import os
 import threading
@@ -24,11 +27,11 @@ __all__ = ["flush", "load", "path", "store"]
 
 #: the file starts again empty past this many entries (a verdict is recomputed in milliseconds)
 MAX_ENTRIES = 4096
+#: pending verdicts written at once when this many wait
+MAX_PENDING = 64
 
 _LOCK = threading.Lock()
-_PENDING: dict[str, list[Any]] = {}
-_WRITER: threading.Thread | None = None
-_WRITING = False  # a writer runs and will take what is pending (under _LOCK)
+_PENDING: dict[Path, dict[str, list[Any]]] = {}  # cache file -> key -> entry
 
 
 def path() -> Path:
@@ -47,15 +50,17 @@ def _read(file: Path) -> dict[str, Any]:
 
 
 def load(key: str) -> list[Any] | None:
-    """The entry stored under ``key``, or None (none, or the file unreadable). Waits for this
-    process's pending writes first."""
-    flush()
-    entry = _read(path()).get(key)
+    """The entry stored under ``key`` (this process's pending one first, else the file's), or
+    None (none, or the file unreadable)."""
+    file = path()
+    with _LOCK:
+        entry = _PENDING.get(file, {}).get(key)
+    if entry is None:
+        entry = _read(file).get(key)
     return entry if isinstance(entry, list) else None
 
 
-def _merge(batch: dict[str, list[Any]]) -> None:
-    file = path()
+def _merge(file: Path, batch: dict[str, list[Any]]) -> None:
     try:
         data = _read(file)
         if len(data) + len(batch) > MAX_ENTRIES:
@@ -69,33 +74,25 @@ def _merge(batch: dict[str, list[Any]]) -> None:
         pass
 
 
-def _write_pending() -> None:
-    global _WRITING
-    while True:
-        with _LOCK:
-            if not _PENDING:
-                _WRITING = False
-                return
-            batch = dict(_PENDING)
-            _PENDING.clear()
-        _merge(batch)
-
-
 def store(key: str, entry: list[Any]) -> None:
-    """Merge ``entry`` under ``key`` into the cache file, in a background thread."""
-    global _WRITER, _WRITING
+    """Keep ``entry`` under ``key``: in memory now, in the cache file at :func:`flush` (at the
+    latest when the process ends)."""
+    file = path()  # the cache folder of now (a test may change it later)
     with _LOCK:
-        _PENDING[key] = entry
-        if _WRITING:
-            return  # the running writer takes it
-        _WRITING = True
-        _WRITER = threading.Thread(target=_write_pending, name="biafc-verdict-store")
-        _WRITER.start()
+        pending = _PENDING.setdefault(file, {})
+        pending[key] = entry
+        full = len(pending) >= MAX_PENDING
+    if full:
+        flush()
 
 
 def flush() -> None:
-    """Wait until every verdict stored so far by this process is in the file."""
-    with _LOCK:
-        writer = _WRITER
-    if writer is not None and writer is not threading.current_thread():
-        writer.join()
+    """Write every verdict stored so far by this process into the file."""
+    with _LOCK:  # held while writing: two flushes do not write the same file in turn
+        batches = dict(_PENDING)
+        _PENDING.clear()
+        for file, batch in batches.items():
+            _merge(file, batch)
+
+
+atexit.register(flush)

@@ -21,7 +21,14 @@ from sim_backend import dem
 from sim_backend.dem import step_limit, verdict_store
 from sim_backend.dem.kernel import drift_coefficients
 from sim_backend.dem.simulation import INTEGRATORS, block_modes
-from sim_backend.dem.stability_certificate import _rotations, certified, half_map, half_stages
+from sim_backend.dem.stability_certificate import (
+    _gram,
+    _half_band,
+    _rotations,
+    certified,
+    half_map,
+    half_stages,
+)
 from sim_backend.dem.step_map import STABLE, stability_codes
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -89,6 +96,12 @@ def test_the_half_map_gives_the_compiled_step_maps_blocks(default: dem.Chain, na
     A, B = step_limit._position_blocks(win, name, h, np.array([k]))
     assert np.abs(Xd.T @ Xa + Xb.T @ Xc - A[0]).max() <= 1e-13 * np.abs(A[0]).max()
     assert np.abs(2 * Xb.T @ Xd - B[0]).max() <= 1e-13 * np.abs(B[0]).max()
+    # the certificate's products, summed on the band, are the dense ones
+    Qb, Pb = _half_band(win.phi, win.omega, win.left, win.right, a_w, b_w, h, k)
+    K = Qb.shape[2]
+    for band, dense in ((_gram(Qb[..., :K], Qb[..., K:]), Xa @ Xb.T),
+                        (_gram(Pb[..., :K], Pb[..., K:]), Xc @ Xd.T)):  # fmt: skip
+        assert np.abs(band - dense).max() <= 1e-13 * np.abs(dense).max()
     X = np.vstack([Q, P])
     J = np.block([[np.zeros((D, D)), np.eye(D)], [-np.eye(D), np.zeros((D, D))]])
     scale = np.abs(X).max() ** 2
