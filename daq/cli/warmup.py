@@ -1,7 +1,7 @@
-"""``biafc warmup``: compile (or load) the DEM kernel and the step-stability map ahead of time,
-and the default chain's step-stability verdicts at the shipped protocols' sample rates, so that
-the first run starts at once. Prints what it did and where the cache is (the user's cache
-folder)."""
+"""``biafc warmup``: compile (or load) the DEM kernel ahead of time, and check the default chain's
+step stability at the shipped protocols' sample rates, so that the first run starts at once (the
+stability check compiles nothing: :mod:`sim_backend.dem.stability_certificate`). Prints what it
+did and where the cache is (the user's cache folder)."""
 
 from __future__ import annotations
 
@@ -46,11 +46,6 @@ def run(args: argparse.Namespace) -> int:
     for rate in RATES_HZ:
         strong = dem.Drive("ltr", "displacement", 4.0 * chain.delta0_m, waveform=(wave, 1e6))
         dem.simulate(chain, [strong], duration_s=1e-4, sample_rate_Hz=rate, error_estimate=True)
-    # a chain without shipped verdicts (a modified chain, a study's cells) scans with the
-    # compiled step map: compile or load it now too
-    from sim_backend.dem.step_map import warm_up
-
-    warm_up()
     t_stab = time.perf_counter() - t1
     print(
         f"warm: DEM kernel ready in {t_kernel:.1f} s (imports {t_import:.1f} s, default chain "

@@ -8,22 +8,24 @@ constant matrix ``P(h)`` acting on the modal state ``(q, p)`` of the chain ([2D,
 The step is stable when the spectral radius ``rho(P(h)) <= 1`` (the map is symplectic: stable
 eigenvalues lie on the unit circle; an unstable one grows by ``rho`` per step).
 
-How it is computed, in about 0.3 ms per step and overlap on the default chain (D = 124), the
-overlaps of a scan together: a kick acts only through the primary masses and couples a cylinder
-to its neighbours only, so the map's position blocks are built by a compiled kernel on the band
-that a column can reach (:mod:`sim_backend.dem.step_map`, all overlaps in one call; the numpy
-:func:`_step_map` builds the whole map for a splitting that is not symmetric). Every splitting
-here is symmetric, so its step map ``M = [[A, B], [C, A^T]]`` is time-reversible as well as
-symplectic: ``R M R = M^-1`` with ``R = diag(I, -I)``. Then ``M + M^-1 = diag(2A, 2A^T)``, so
-the eigenvalues of ``M`` are the pairs ``lambda = c +- sqrt(c^2 - 1)`` of the eigenvalues ``c``
-of the [D, D] position block ``A``: one eigenvalue problem of size D instead of 2D. ``B`` is
+How it is computed, in about 1 ms per step and overlap on the default chain (D = 124), with
+numpy and LAPACK only (nothing to compile): every splitting here is a palindrome, so its step is
+``M = R X^-1 R X`` with ``X`` half a step's map, built on the band of cylinders a column can
+reach (:func:`sim_backend.dem.stability_certificate.half_map`), and the position blocks below are
+``A = Xd^T Xa + Xb^T Xc``, ``B = 2 Xb^T Xd`` (:func:`_position_blocks`; the numpy
+:func:`_step_map` builds the whole map for a splitting that is not symmetric, and the compiled
+:mod:`sim_backend.dem.step_map`, stage by stage, is the tests' independent reference). Every
+splitting here is symmetric, so its step map ``M = [[A, B], [C, A^T]]`` is time-reversible as
+well as symplectic: ``R M R = M^-1`` with ``R = diag(I, -I)``. Then ``M + M^-1 = diag(2A,
+2A^T)``, so the eigenvalues of ``M`` are the pairs ``lambda = c +- sqrt(c^2 - 1)`` of the
+eigenvalues ``c`` of the [D, D] position block ``A``: one eigenvalue problem of size D instead
+of 2D. ``B`` is
 symmetric, and when it is positive definite (small steps), ``A B`` is symmetric too, so
 ``L^-1 A L`` (``B = L L^T``) is a symmetric matrix with the same ``c``: real, found by a symmetric
 solver, and the step is stable exactly when they all lie in [-1, 1], i.e. when ``B - A B`` and
 ``B + A B`` are positive definite: two Cholesky factorisations (LAPACK ``dpotrf``) per overlap,
-the eigenvalues only when one fails. The blocks, ``A B`` and both factorisations of every overlap
-of a scan are one compiled call (:func:`sim_backend.dem.step_map.stability_codes`: 2.2 ms for 8
-overlaps). (The dense 2D x 2D eigenvalues agree to round-off: ``tests/dem/test_setup_cost.py``.)
+the eigenvalues only when one fails. (The dense 2D x 2D eigenvalues agree to round-off, and the
+compiled map's verdicts at every point compared: ``tests/dem/test_setup_cost.py``.)
 
 The largest stable step ``h_max`` is the end of the small-step regime: the smallest ``h`` at which
 the step is unstable (``rho(P(h)) > 1 + tol``) or ``B`` stops being positive definite, found by a
@@ -73,7 +75,7 @@ from sim_backend.dem import verdict_store
 from sim_backend.dem.chain import Chain
 from sim_backend.dem.drive import Drive
 from sim_backend.dem.kernel import drift_coefficients
-from sim_backend.dem.stability_certificate import certified
+from sim_backend.dem.stability_certificate import certified, half_map
 from sim_backend.dem.threads import one_blas_thread
 
 __all__ = [
@@ -336,14 +338,26 @@ def _position_blocks(
     stiffness: NDArray[np.float64],
     symmetric_b: bool = False,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Position blocks ``A``, ``B`` ([M, D, D]) of the step maps for M contact stiffnesses (N/m),
-    compiled (:func:`sim_backend.dem.step_map.position_blocks`)."""
-    from sim_backend.dem.step_map import position_blocks
+    """Position blocks ``A``, ``B`` ([M, D, D]) of the step maps of a symmetric splitting for M
+    contact stiffnesses (N/m), from half a step's map ``X``
+    (:func:`sim_backend.dem.stability_certificate.half_map`): ``A = Xd^T Xa + Xb^T Xc``,
+    ``B = 2 Xb^T Xd`` (``M = R X^-1 R X``). numpy and BLAS, nothing compiled (the compiled
+    :func:`sim_backend.dem.step_map.position_blocks`, built stage by stage, is the tests'
+    independent reference). symmetric_b: ``B``'s symmetric part (symmetric to round-off)."""
+    from sim_backend.dem.simulation import INTEGRATORS
 
-    coef, idx, kick = _stages(win, integrator, h)
-    return position_blocks(
-        win.phi, coef, idx, kick, stiffness, win.left, win.right, symmetric_b=symmetric_b
-    )
+    _, a_w, b_w = INTEGRATORS[integrator]
+    D = win.phi.size
+    A = np.empty((len(stiffness), D, D))
+    B = np.empty((len(stiffness), D, D))
+    for o, k in enumerate(stiffness):
+        Q, P = half_map(win.phi, win.omega, win.left, win.right, a_w, b_w, h, float(k))
+        Xa, Xb, Xc, Xd = Q[:, :D], Q[:, D:], P[:, :D], P[:, D:]
+        A[o] = Xd.T @ Xa + Xb.T @ Xc
+        B[o] = 2.0 * (Xb.T @ Xd)
+        if symmetric_b:
+            B[o] = 0.5 * (B[o] + B[o].T)
+    return A, B
 
 
 def _window_stable_many(
@@ -358,22 +372,29 @@ def _window_stable_many(
     and ``C B + A B`` are positive definite (two Cholesky factorisations, LAPACK's ``dpotrf``),
     which also makes ``B = (C B - A B + C B + A B) / 2C`` positive definite, the premise of the
     equivalence; anything else (a factorisation that fails) is decided by the eigenvalues. The
-    blocks and the factorisations of all M stiffnesses are one compiled call
-    (:func:`sim_backend.dem.step_map.stability_codes`). ``small_step``: also require ``B``
-    positive definite (the small-step regime of :func:`largest_stable_step`)."""
+    blocks come from half a step's map (:func:`_position_blocks`): nothing to compile or load, so
+    a check that the certificate does not answer, or the search for the largest stable step behind
+    a refusal, costs no compile on a fresh install (the compiled scan took 3 s to compile there).
+    ``small_step``: also require ``B`` positive definite (the small-step regime of
+    :func:`largest_stable_step`)."""
     if not _palindromic(integrator):
         return [_window_radius(win, integrator, h, k) <= 1.0 + STABILITY_TOL for k in stiffness]
-    from sim_backend.dem.step_map import STABLE, UNDECIDED, stability_codes
+    from scipy.linalg.lapack import dpotrf
 
-    coef, idx, kick = _stages(win, integrator, h)
-    codes, A, Bs = stability_codes(
-        win.phi, coef, idx, kick, stiffness, win.left, win.right, _C_TOL, small_step
-    )
-    return [
-        bool(code == STABLE)
-        or (code == UNDECIDED and _radius_from_blocks(A[o], Bs[o]) <= 1.0 + STABILITY_TOL)
-        for o, code in enumerate(codes.tolist())
-    ]
+    A, Bs = _position_blocks(win, integrator, h, np.asarray(stiffness), symmetric_b=True)
+    out = []
+    for o in range(A.shape[0]):
+        ab = A[o] @ Bs[o]  # symmetric to round-off when B is
+        cb = _C_TOL * Bs[o]
+        ok = (
+            dpotrf(np.subtract(cb, ab).T, lower=1, clean=0, overwrite_a=1)[1] == 0
+            and dpotrf(np.add(cb, ab).T, lower=1, clean=0, overwrite_a=1)[1] == 0
+        )
+        if not ok and small_step and dpotrf(Bs[o].T, lower=1, clean=0, overwrite_a=0)[1] != 0:
+            out.append(False)  # past the small-step regime
+            continue
+        out.append(ok or _radius_from_blocks(A[o], Bs[o]) <= 1.0 + STABILITY_TOL)
+    return out
 
 
 def _stable_many(

@@ -18,10 +18,12 @@ with BLAS ``dgemm`` and LAPACK ``dpotrf`` (scipy's, called through numba's own C
 scan of many stiffnesses has no Python step per stiffness; a failed factorisation is reported and
 the caller decides by the eigenvalues.
 
-A run's check (:func:`sim_backend.dem.step_limit.stable_up_to`) needs this only where the
-stability certificate of half a step (:mod:`sim_backend.dem.stability_certificate`, no compiled
-code) does not hold: near or past the edge of the small-step regime, or for a splitting that is
-not symmetric; :func:`sim_backend.dem.step_limit.largest_stable_step` always uses it.
+Since 2026-11-27 no check uses it: :mod:`sim_backend.dem.step_limit` builds the same blocks from
+half a step's map with numpy (:mod:`sim_backend.dem.stability_certificate`), which needs nothing
+compiled (this module compiled for 3 s on a fresh install before the first refusal of an unstable
+step, and took 5-8 ms to load in every new process). It stays as the independent implementation
+the tests compare those blocks and verdicts with (``tests/dem/test_setup_cost.py``,
+``tests/dem/test_stability_certificate.py``).
 
 Cost on the default chain (n = 31, K = 4, blanes-moan4: 7 drifts, 6 kicks), one thread: a scan of
 8 stiffnesses (blocks and factorisations) 2.2 ms, against 2.7 ms for the blocks here and the
@@ -50,7 +52,6 @@ __all__ = [
     "UNDECIDED",
     "position_blocks",
     "stability_codes",
-    "warm_up",
 ]
 
 #: :func:`stability_codes`: every ``c`` in [-C, C] (stable)
@@ -371,13 +372,3 @@ def stability_codes(
     """
     return _run(phi, coef, stage_coef, kick_h, stiffness, left, right, True, True, c_tol,
                 small_step)  # fmt: skip
-
-
-def warm_up() -> None:
-    """Compile (or load) the compiled map and test now, on a one-cylinder window: ``biafc
-    warmup`` calls it, so that the first stability scan of a chain that ships no verdicts (a
-    modified chain, a study's cells) does not compile during a run."""
-    stability_codes(
-        np.ones((1, 1)), np.zeros((1, 1, 4)), np.zeros(2, dtype=np.int64), np.ones(1),
-        np.ones(1), left=True, right=True, c_tol=1.0,
-    )  # fmt: skip

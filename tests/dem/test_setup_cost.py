@@ -368,59 +368,47 @@ def test_scan_verdicts_equal_the_dense_eigenvalues_on_the_default_chain(
     assert verdicts == {True, False}
 
 
-def _previous_window_verdicts(
+def _compiled_window_verdicts(
     win: step_limit._Window, integrator: str, h: float, ks: np.ndarray, small_step: bool
 ) -> list[bool]:
-    """The verdicts as the scan gave them before the test moved into the compiled call: the
-    blocks compiled, then per stiffness numpy's matmul and scipy's dpotrf, the eigenvalues when a
-    factorisation fails."""
-    from scipy.linalg.lapack import dpotrf
+    """The verdicts of the compiled map and test (``step_map.stability_codes``, built stage by
+    stage on the band), the eigenvalues of its blocks where a factorisation failed: the path the
+    check took before the half-step blocks, kept as an independent implementation."""
+    from sim_backend.dem.step_map import STABLE, UNDECIDED, stability_codes
 
-    A, Bs = step_limit._position_blocks(win, integrator, h, ks, symmetric_b=True)
-    AB = np.matmul(A, Bs)
-    out = []
-    for o in range(ks.size):
-        cb = step_limit._C_TOL * Bs[o]
-        ok = (
-            dpotrf(np.subtract(cb, AB[o]).T, lower=1, clean=0, overwrite_a=1)[1] == 0
-            and dpotrf(np.add(cb, AB[o], out=cb).T, lower=1, clean=0, overwrite_a=1)[1] == 0
-        )
-        if not ok and small_step and dpotrf(Bs[o].T, lower=1, clean=0, overwrite_a=0)[1] != 0:
-            out.append(False)
-            continue
-        out.append(
-            ok or step_limit._radius_from_blocks(A[o], Bs[o]) <= 1 + step_limit.STABILITY_TOL
-        )
-    return out
+    coef, idx, kick = step_limit._stages(win, integrator, h)
+    codes, A, Bs = stability_codes(win.phi, coef, idx, kick, ks, win.left, win.right,
+                                   step_limit._C_TOL, small_step)  # fmt: skip
+    return [
+        bool(code == STABLE)
+        or (code == UNDECIDED and step_limit._radius_from_blocks(A[o], Bs[o]) <= 1 + 1e-6)
+        for o, code in enumerate(codes.tolist())
+    ]
 
 
 @pytest.mark.parametrize("integrator", ["blanes-moan4", "yoshida6"])
-def test_one_call_verdicts_equal_the_previous_path(
-    undamped: dem.Chain, integrator: str, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    """The blocks and both factorisations of every stiffness in one compiled call
-    (``step_map.stability_codes``) give the verdicts of the previous path (factorisations in
-    Python, per stiffness), with and without the small-step test, across the stable steps, the
-    narrow unstable bands above the limit and the steps past it; the scan no longer calls
-    scipy's dpotrf from Python."""
-    import scipy.linalg.lapack
-
-    def no_python_dpotrf(*args: object, **kwargs: object) -> object:
-        raise AssertionError("dpotrf called from Python")
-
+def test_half_step_verdicts_equal_the_compiled_ones(undamped: dem.Chain, integrator: str) -> None:
+    """The blocks from half a step's map (numpy, nothing compiled) give the verdicts of the
+    compiled map and test, with and without the small-step test, across the stable steps, the
+    narrow unstable bands above the limit and the steps past it."""
     win = step_limit._windows(undamped)[0]
     ks = np.array([step_limit.contact_stiffness_N_per_m(undamped, f * undamped.delta0_m)
                    for f in (1.0, 1.25**4, 1.25**7, 16.0)])  # fmt: skip
     seen = set()
     for h in np.geomspace(1.0e-6, 12.8e-6, 12):
         for small_step in (False, True):
-            want = _previous_window_verdicts(win, integrator, float(h), ks, small_step)
-            with monkeypatch.context() as m:
-                m.setattr(scipy.linalg.lapack, "dpotrf", no_python_dpotrf)
-                got = step_limit._window_stable_many(win, integrator, float(h), ks, small_step)
+            want = _compiled_window_verdicts(win, integrator, float(h), ks, small_step)
+            got = step_limit._window_stable_many(win, integrator, float(h), ks, small_step)
             assert got == want, (h, small_step)
             seen.update(got)
     assert seen == {True, False}
+    coef, idx, kick = step_limit._stages(win, integrator, 6.5e-6)
+    from sim_backend.dem.step_map import position_blocks
+
+    A, B = position_blocks(win.phi, coef, idx, kick, ks, win.left, win.right)
+    A2, B2 = step_limit._position_blocks(win, integrator, 6.5e-6, ks)
+    assert np.abs(A2 - A).max() <= 1e-13 * np.abs(A).max()
+    assert np.abs(B2 - B).max() <= 1e-13 * np.abs(B).max()
 
 
 def test_block_modes_are_computed_once_per_chain_and_read_only(
@@ -449,29 +437,29 @@ def test_block_modes_are_computed_once_per_chain_and_read_only(
     assert calls["eigh"] == 2 * chain.n
 
 
-def test_warmup_compiles_the_step_stability_map_too() -> None:
-    """``biafc warmup`` leaves nothing to compile for the first stability scan of a chain that
-    ships no verdicts (a modified chain, a study's cells): the compiled step map is loaded."""
+def test_a_refusal_on_a_chain_that_ships_nothing_loads_no_compiled_stability_code() -> None:
+    """A fresh process refuses an unstable step on a chain that ships no verdicts (the grid scan
+    and the search for the largest stable step, which the certificate does not answer) without
+    the compiled step map: on a fresh install it compiled for 3 s before the refusal."""
     import os
     import subprocess
     import sys
     from pathlib import Path
 
     probe = (
-        "from daq.cli.biafc import main\n"
-        "assert main(['warmup', '--quiet']) == 0\n"
+        "import sys\n"
         "from sim_backend import dem\n"
-        "from sim_backend.dem import step_limit, step_map\n"
-        "print('step map signatures', len(step_map._scan.signatures))\n"
-        # a scan of a chain that ships nothing: its block modes are read-only arrays, which must
-        # not make numba compile a second specialisation (the warm-up's would go unused)
+        "from sim_backend.dem import step_limit\n"
         "chain = dem.build_chain(dem.load_chain_with_settings(None, ['preload=6 N']))\n"
-        "step_limit._stable_many(chain, 'blanes-moan4', 5e-6, [chain.delta0_m])\n"
-        "print('after a scan', len(step_map._scan.signatures))\n"
+        "try:\n"
+        "    step_limit.check_step(chain, 'blanes-moan4', 50e-6)\n"
+        "except step_limit.StepTooLargeError as exc:\n"
+        "    print('refused', round(exc.h_max_s * 1e6, 3))\n"
+        "print('step map loaded', 'sim_backend.dem.step_map' in sys.modules)\n"
     )
     root = Path(__file__).resolve().parents[2]
     env = {k: v for k, v in os.environ.items() if not k.startswith("NUMBA_CACHE")}
     out = subprocess.run([sys.executable, "-c", probe], env=env, cwd=root, capture_output=True,
                          text=True, check=True, timeout=300)  # fmt: skip
-    assert "step map signatures 1" in out.stdout
-    assert "after a scan 1" in out.stdout, out.stdout
+    assert "refused 6." in out.stdout, out.stdout
+    assert "step map loaded False" in out.stdout, out.stdout
