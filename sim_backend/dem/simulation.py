@@ -241,9 +241,9 @@ def _scan_ahead(
 ) -> ScanAhead | None:
     """The stability scans this call will need (the step ``h`` (s) when ``check_h``, the error
     estimate's ``2h`` when ``check_2h``), started in a background thread when some verdict is
-    not known yet, the kernel is not loaded in this process, and some step needs the compiled
-    grid scan (the certificate does not apply to it: :func:`step_limit.certificate_applies`): the
-    scan then runs while the kernel loads (about 0.25 s from the cache folder), not after it.
+    not known yet, the kernel is not loaded in this process, and some step needs the grid scan
+    (the certificate does not apply to it: :func:`step_limit.certificate_applies`): the scan then
+    runs while the kernel loads (about 0.25 s from the cache folder), not after it.
     ``None`` otherwise (the checks run in turn: a certificate costs about a millisecond, and in a
     thread beside the kernel's load it added 6 ms to the first ``simulate``, 25 interleaved
     fresh processes)."""
