@@ -76,9 +76,37 @@ def quasi_bands(chain: Chain, n_bands: int = 3) -> Bands:
     """Onset/cutoff edges (Hz) of the first ``n_bands`` bands of every cylinder (DEM cell).
 
     ``n_bands`` may be at most J + 1 (J resonators per cylinder).
+
+    The cell's apparent mass is that of its (J+1)-mass block (the primary, each resonator on a
+    spring ``m_j w_j^2``), so its edges are eigenfrequencies: the onsets (``M(w) = 0``) those of
+    the free block, the cutoffs (``w^2 M(w) = 4K``) those of the block with its primary held by a
+    spring ``4K``, one of each between consecutive poles. All cylinders in two batched symmetric
+    eigenvalue calls (numpy), no root search: the root search (:func:`_edges`, scipy's brentq)
+    imported scipy.optimize, 0.3 s of every ``run_protocol`` on the simulated bench, and agrees
+    to 1e-10 (``tests/dem/test_bands.py``).
     """
     if not 1 <= n_bands <= chain.n_modes + 1:
         raise ValueError(f"n_bands must be in 1..{chain.n_modes + 1} for J = {chain.n_modes}")
+    N, J = chain.m_res_kg.shape
+    k = chain.m_res_kg * chain.omega_res_rad_s**2  # [N, J] resonator springs (N/m)
+    stiff = np.zeros((N, J + 1, J + 1))
+    stiff[:, 0, 0] = k.sum(axis=1)
+    stiff[:, 0, 1:] = -k
+    stiff[:, 1:, 0] = -k
+    stiff[:, np.arange(1, J + 1), np.arange(1, J + 1)] = k
+    s = 1.0 / np.sqrt(np.concatenate([chain.m0_kg[:, None], chain.m_res_kg], axis=1))  # [N, J+1]
+    a = s[:, :, None] * stiff * s[:, None, :]  # M^-1/2 K M^-1/2
+    free = np.sqrt(np.clip(np.linalg.eigvalsh(a), 0.0, None))  # 0 (rigid), then the onsets
+    a[:, 0, 0] += 4.0 * chain.K_lin * s[:, 0] ** 2
+    held = np.sqrt(np.linalg.eigvalsh(a))  # the cutoffs
+    onset = free[:, :n_bands].copy()
+    onset[:, 0] = 0.0
+    return Bands(onset / (2.0 * math.pi), held[:, :n_bands] / (2.0 * math.pi))
+
+
+def _quasi_bands_by_root_search(chain: Chain, n_bands: int = 3) -> Bands:
+    """:func:`quasi_bands` by a root search of the cell's apparent mass (its previous method,
+    kept as the test's reference)."""
     onset = np.empty((chain.n, n_bands))
     cutoff = np.empty((chain.n, n_bands))
     for i in range(chain.n):

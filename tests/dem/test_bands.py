@@ -126,3 +126,41 @@ def test_oblique_crossing_matches_the_elliptical_hertz_approximation(degrees: fl
     assert beta > hertz_beta(d, FUSED_QUARTZ)
     spec = dem.default_chain_spec().model_copy(update={"crossing_angle": math.radians(degrees)})
     assert dem.build_chain(spec).beta_c == pytest.approx(beta)
+
+
+@pytest.mark.parametrize(
+    "update", [{}, {"n_modes": 6}, {"preload": 0.5}, {"n_cylinders": 5, "n_modes": 1}]
+)
+def test_cell_edges_by_eigenvalues_equal_the_root_search(update: dict[str, object]) -> None:
+    """The cell's edges as eigenfrequencies of its block (free, and held by 4K) are the roots of
+    its apparent mass that the previous root search found, for every band count."""
+    from sim_backend.dem import bands
+
+    chain = dem.build_chain(dem.default_chain_spec().model_copy(update=update))
+    for n_bands in range(1, chain.n_modes + 2):
+        got = dem.quasi_bands(chain, n_bands)
+        ref = bands._quasi_bands_by_root_search(chain, n_bands)
+        scale = ref.cutoff_Hz.max()
+        assert np.abs(got.onset_Hz - ref.onset_Hz).max() <= 1e-12 * scale
+        assert np.abs(got.cutoff_Hz - ref.cutoff_Hz).max() <= 1e-12 * scale
+
+
+def test_run_protocol_on_the_simulated_bench_imports_no_scipy_optimize(tmp_path: object) -> None:
+    """The bench's chain information (its quasi-bands) needs no root search: scipy.optimize
+    (0.3 s to import) is not loaded by a smoke run."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    out = Path(str(tmp_path)) / "smoke.h5"
+    probe = (
+        "import sys\n"
+        "from daq.cli.run_protocol import main\n"
+        f"sys.argv = ['run_protocol', 'smoke', '--out', {str(out)!r}, '--quiet']\n"
+        "code = main()\n"
+        "print('exit', code, 'scipy.optimize' in sys.modules)\n"
+    )
+    root = Path(__file__).resolve().parents[2]
+    res = subprocess.run([sys.executable, "-c", probe], cwd=root, capture_output=True,
+                         text=True, timeout=600)  # fmt: skip
+    assert "exit 0 False" in res.stdout, res.stdout + res.stderr
