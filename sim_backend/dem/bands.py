@@ -87,14 +87,8 @@ def quasi_bands(chain: Chain, n_bands: int = 3) -> Bands:
     """
     if not 1 <= n_bands <= chain.n_modes + 1:
         raise ValueError(f"n_bands must be in 1..{chain.n_modes + 1} for J = {chain.n_modes}")
-    N, J = chain.m_res_kg.shape
-    k = chain.m_res_kg * chain.omega_res_rad_s**2  # [N, J] resonator springs (N/m)
-    stiff = np.zeros((N, J + 1, J + 1))
-    stiff[:, 0, 0] = k.sum(axis=1)
-    stiff[:, 0, 1:] = -k
-    stiff[:, 1:, 0] = -k
-    stiff[:, np.arange(1, J + 1), np.arange(1, J + 1)] = k
-    s = 1.0 / np.sqrt(np.concatenate([chain.m0_kg[:, None], chain.m_res_kg], axis=1))  # [N, J+1]
+    stiff, mass = chain.block_matrices()
+    s = 1.0 / np.sqrt(mass)  # [N, J+1]
     a = s[:, :, None] * stiff * s[:, None, :]  # M^-1/2 K M^-1/2
     free = np.sqrt(np.clip(np.linalg.eigvalsh(a), 0.0, None))  # 0 (rigid), then the onsets
     a[:, 0, 0] += 4.0 * chain.K_lin * s[:, 0] ** 2

@@ -79,6 +79,20 @@ class Chain:
         """True when any damping ratio (bending modes or contacts) is above 0."""
         return self.bending_damping_ratio > 0.0 or self.contact_damping_ratio > 0.0
 
+    def block_matrices(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Each cylinder's free (J+1)-mass block, the primary and its resonators, each on a spring
+        ``k_res`` to the primary: ``(stiffness [N, J+1, J+1] (N/m), mass [N, J+1] (kg))``, index
+        0 the primary. Its eigenfrequencies are the block modes (``simulation.block_modes``) and
+        the quasi-band onsets (``bands.quasi_bands``)."""
+        N, J = self.k_res_N_per_m.shape
+        k = self.k_res_N_per_m
+        stiff = np.zeros((N, J + 1, J + 1))
+        stiff[:, 0, 0] = k.sum(axis=1)
+        stiff[:, 0, 1:] = -k
+        stiff[:, 1:, 0] = -k
+        stiff[:, np.arange(1, J + 1), np.arange(1, J + 1)] = k
+        return stiff, np.concatenate([self.m0_kg[:, None], self.m_res_kg], axis=1)
+
     def contact_dashpot_Ns_per_m(self) -> NDArray[np.float64]:
         """[N+1] dashpot coefficient (N s/m) of each contact: wall-#1, #1-#2, ..., #N-wall."""
         m = np.concatenate([self.m0_kg[:1], self.m0_kg, self.m0_kg[-1:]])

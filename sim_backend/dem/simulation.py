@@ -154,15 +154,9 @@ def _block_modes(chain: Chain) -> BlockModes:
     N, J = chain.n, chain.n_modes
     phi0 = np.empty((N, J + 1))
     omega = np.empty((N, J + 1))
+    stiff, mass = chain.block_matrices()
     for i in range(N):
-        k = chain.k_res_N_per_m[i]
-        M = np.diag(np.concatenate([[chain.m0_kg[i]], chain.m_res_kg[i]]))
-        Kb = np.zeros((J + 1, J + 1))
-        Kb[0, 0] = k.sum()
-        Kb[0, 1:] = -k
-        Kb[1:, 0] = -k
-        Kb[1:, 1:] = np.diag(k)
-        w2, vec = eigh(Kb, M)
+        w2, vec = eigh(stiff[i], np.diag(mass[i]))
         order = np.argsort(w2)
         w2, vec = w2[order], vec[:, order]
         w2[0] = 0.0

@@ -51,8 +51,8 @@ and no drive given) has no kick instability: ``h_max = inf``.
 The run's check (:func:`check_step`, :func:`stable_up_to`) asks more than one step: that the
 step is stable at every overlap from ``delta0`` up to the run's largest. Inside the small-step
 regime it is answered by a sufficient condition computed from half a step, with no eigenvalues and
-no compiled code (:mod:`sim_backend.dem.stability_certificate`); the grid scan of the compiled
-test is the fallback.
+no compiled code (:mod:`sim_backend.dem.stability_certificate`); the grid scan of the test above
+is the fallback.
 
 Long chains (N (J+1) > 256) are checked on windows of 32 cylinders whose end contacts hold fixed
 neighbours (the stiffest boundary): the first and last windows and those around the stiffest block
@@ -302,34 +302,6 @@ def _radius_from_blocks(A: NDArray[np.float64], B: NDArray[np.float64]) -> float
 #: stable means every ``c`` in [-C_TOL, C_TOL]: the ``c`` of ``rho = 1 + STABILITY_TOL``
 _C_TOL = 0.5 * ((1.0 + STABILITY_TOL) + 1.0 / (1.0 + STABILITY_TOL))
 
-_STAGES: dict[tuple[str, float, int], tuple[Any, ...]] = {}
-
-
-def _stages(
-    win: _Window, integrator: str, h: float
-) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.float64]]:
-    """The splitting's stages at step ``h`` (s) on ``win`` for :mod:`sim_backend.dem.step_map`:
-    the drift coefficients of its distinct drift lengths ([S, D, 4]), which of them each drift
-    uses ([m + 1]) and the kick lengths ``b_s h`` ([m], s). Computed once per (window,
-    integrator, step), not once per stiffness."""
-    key = (integrator, h, id(win))
-    hit = _STAGES.get(key)
-    if hit is not None and hit[0] is win:
-        return hit[1], hit[2], hit[3]
-    from sim_backend.dem.simulation import INTEGRATORS
-
-    _, a_w, b_w = INTEGRATORS[integrator]
-    sizes = list(dict.fromkeys(a_w))
-    om = win.omega.ravel()
-    zeta = np.zeros_like(om)
-    coef = np.stack([drift_coefficients(om, zeta, a * h) for a in sizes])
-    idx = np.array([sizes.index(a) for a in a_w], dtype=np.int64)
-    kick = np.asarray(b_w, dtype=np.float64) * h
-    if len(_STAGES) > 64:
-        _STAGES.clear()
-    _STAGES[key] = (win, coef, idx, kick)  # the window is held: its id is not reused meanwhile
-    return coef, idx, kick
-
 
 def _position_blocks(
     win: _Window,
@@ -405,7 +377,7 @@ def _stable_many(
     small_step: bool = False,
 ) -> list[bool]:
     """``spectral_radius(...) <= 1 + STABILITY_TOL`` at each overlap (m), all at once (one
-    compiled call per window for all of them), decided by :func:`_window_stable_many`."""
+    call per window for all of them), decided by :func:`_window_stable_many`."""
     if not overlaps_m:
         return []
     ks = np.array([contact_stiffness_N_per_m(chain, d) for d in overlaps_m])
@@ -562,7 +534,7 @@ def _disk_load(key: str) -> _RangeVerdict | None:
 
 
 def _disk_store(key: str, v: _RangeVerdict) -> None:
-    """Keep ``v`` in the user's cache folder (in the background; best effort)."""
+    """Keep ``v`` in the user's cache folder (written when the process ends; best effort)."""
     unstable: float | str = v.unstable_at_m if math.isfinite(v.unstable_at_m) else "inf"
     verdict_store.store(key, [v.start_m, v.stable_to_m, unstable])
 
@@ -610,7 +582,7 @@ def _certified(chain: Chain, integrator: str, h: float, overlap_m: float) -> boo
 
 def _extend(v: _RangeVerdict, chain: Chain, integrator: str, h: float, overlap_m: float) -> bool:
     """Scan the grid points above what ``v`` knows up to the first at or above ``overlap_m``
-    (all at once, one compiled call), then in order up to the first unstable one; whether any
+    (all at once, one call per window), then in order up to the first unstable one; whether any
     was computed."""
     d = v.start_m if v.stable_to_m <= 0.0 else v.stable_to_m * RANGE_RATIO
     grid: list[float] = []
@@ -725,8 +697,8 @@ def stable_up_to(chain: Chain, integrator: str, h: float, overlap_m: float) -> b
     two Cholesky factorisations, under 1 ms on the default chain), which covers every overlap
     below the one certified: at the grid point ``CERTIFIED_AHEAD`` above ``top`` (so that the
     larger drives of the same protocol are answered from memory), else at ``top``; where neither
-    holds (near or past the regime's edge, or a splitting that is not symmetric), by the compiled
-    scan of the grid points from ``delta0`` up to ``top`` (:func:`_extend`), stopping at the
+    holds (near or past the regime's edge, or a splitting that is not symmetric), by the scan of
+    the grid points from ``delta0`` up to ``top`` (:func:`_extend`), stopping at the
     first unstable one. A grid point above ``overlap_m`` that
     is unstable falls back to the exact two-point check of :func:`is_stable` at ``overlap_m``.
 

@@ -17,6 +17,7 @@ from sim_backend import dem
 from sim_backend.dem import beam, simulation, step_limit
 from sim_backend.dem.material import FUSED_QUARTZ
 from sim_backend.dem.threads import blas_threads
+from tests.dem.compiled_reference import stages
 
 D = 0.0136
 
@@ -376,7 +377,7 @@ def _compiled_window_verdicts(
     check took before the half-step blocks, kept as an independent implementation."""
     from sim_backend.dem.step_map import STABLE, UNDECIDED, stability_codes
 
-    coef, idx, kick = step_limit._stages(win, integrator, h)
+    coef, idx, kick = stages(win, integrator, h)
     codes, A, Bs = stability_codes(win.phi, coef, idx, kick, ks, win.left, win.right,
                                    step_limit._C_TOL, small_step)  # fmt: skip
     return [
@@ -402,7 +403,7 @@ def test_half_step_verdicts_equal_the_compiled_ones(undamped: dem.Chain, integra
             assert got == want, (h, small_step)
             seen.update(got)
     assert seen == {True, False}
-    coef, idx, kick = step_limit._stages(win, integrator, 6.5e-6)
+    coef, idx, kick = stages(win, integrator, 6.5e-6)
     from sim_backend.dem.step_map import position_blocks
 
     A, B = position_blocks(win.phi, coef, idx, kick, ks, win.left, win.right)

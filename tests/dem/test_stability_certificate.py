@@ -30,6 +30,7 @@ from sim_backend.dem.stability_certificate import (
     half_stages,
 )
 from sim_backend.dem.step_map import STABLE, stability_codes
+from tests.dem.compiled_reference import stages
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -142,7 +143,7 @@ def test_strangs_certificate_factors_as_the_docstring_says(default: dem.Chain) -
 
 
 def _codes(win: Any, name: str, h: float, ks: np.ndarray) -> np.ndarray:
-    coef, idx, kick = step_limit._stages(win, name, h)
+    coef, idx, kick = stages(win, name, h)
     codes, _, _ = stability_codes(win.phi, coef, idx, kick, ks, win.left, win.right,
                                   step_limit._C_TOL)  # fmt: skip
     return codes
