@@ -63,11 +63,9 @@ when ``energy`` has 5 columns).
 
 from __future__ import annotations
 
-import inspect
 import itertools
 import math
 import threading
-from typing import Any
 
 import numba
 import numpy as np
@@ -93,7 +91,6 @@ __all__ = [
     "NUMERICS_VERSION",
     "drift_coefficients",
     "drive_value",
-    "load_for",
     "run_batch",
     "run_chunks",
 ]
@@ -837,12 +834,3 @@ def run_batch(
         thread.join()
     if errors:
         raise errors[0]
-
-
-def load_for(*args: Any, **kwargs: Any) -> None:
-    """Load (or compile) the compiled code that ``run_batch(*args, **kwargs)`` runs, without
-    running it: :func:`run_chunks` for these arguments, their defaults filled in."""
-    bound = inspect.signature(run_batch).bind(*args, **kwargs)
-    bound.apply_defaults()
-    full = (0, 0, *bound.args)  # first, stop: Python ints, as run_batch passes them
-    run_chunks.compile(tuple(run_chunks.typeof_pyval(a) for a in full))

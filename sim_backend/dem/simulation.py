@@ -17,16 +17,9 @@ from sim_backend.dem.chain import Chain
 from sim_backend.dem.defaults import DEFAULT_DT_S, DEFAULT_DT_TOP_HZ, DEFAULT_INTEGRATOR
 from sim_backend.dem.drive import Drive
 from sim_backend.dem.errors import step_doubling_error
-from sim_backend.dem.kernel import drift_coefficients, load_for, run_batch
-from sim_backend.dem.kernel_cache import compile_notice, kernel_loaded
-from sim_backend.dem.step_limit import (
-    ScanAhead,
-    StepTooLargeError,
-    certificate_applies,
-    check_step,
-    reference_overlap_m,
-    scan_needed,
-)
+from sim_backend.dem.kernel import drift_coefficients, run_batch
+from sim_backend.dem.kernel_cache import compile_notice
+from sim_backend.dem.step_limit import StepTooLargeError, check_step
 from sim_backend.dem.threads import one_blas_thread
 
 __all__ = [
@@ -224,41 +217,6 @@ def _cylinder_indices(chain: Chain, cylinders: Sequence[int] | None) -> NDArray[
     return idx - 1
 
 
-def _scan_ahead(
-    chain: Chain,
-    name: str,
-    h: float,
-    sample_rate_Hz: float,
-    drives: Sequence[Drive],
-    check_h: bool,
-    check_2h: bool,
-) -> ScanAhead | None:
-    """The stability scans this call will need (the step ``h`` (s) when ``check_h``, the error
-    estimate's ``2h`` when ``check_2h``), started in a background thread when some verdict is
-    not known yet, the kernel is not loaded in this process, and some step needs the grid scan
-    (the certificate does not apply to it: :func:`step_limit.certificate_applies`): the scan then
-    runs while the kernel loads (about 0.25 s from the cache folder), not after it.
-    ``None`` otherwise (the checks run in turn: a certificate costs about a millisecond, and in a
-    thread beside the kernel's load it added 6 ms to the first ``simulate``, 25 interleaved
-    fresh processes)."""
-    if not (check_h or check_2h) or kernel_loaded():
-        return None
-    overlap = reference_overlap_m(chain, drives)
-    steps = [h] if check_h else []
-    if check_2h:  # the step of the rerun at 2h, as that call will compute it
-        steps.append(steps_per_sample(2.0 * h, sample_rate_Hz / 2.0)[1])
-    if not any(scan_needed(chain, name, s, overlap) for s in steps):
-        return None
-    if all(certificate_applies(chain, name, s) for s in steps):
-        return None  # a certificate each, in turn: in a thread it would contend for the GIL
-    return ScanAhead(chain, name, steps, overlap)
-
-
-def _load_kernel(args: tuple[Any, ...]) -> None:
-    """Load (or compile) the kernel for these arguments without running it."""
-    load_for(*args)
-
-
 def simulate(
     chain: Chain,
     drives: Sequence[Drive],
@@ -291,9 +249,8 @@ def simulate(
         An explicit step that is linearly unstable for this chain and integrator (see
         :mod:`sim_backend.dem.step_limit`) raises :class:`StepTooLargeError` (a ``ValueError``)
         whose message gives the largest stable step (``refuse_unstable=False`` skips the check,
-        to measure that such a step really blows up). In a process that has not loaded the
-        kernel yet, a check whose verdict is not known runs in a background thread while the
-        kernel loads, and is over before anything runs.
+        to measure that such a step really blows up). The check comes first: a refused step
+        loads no kernel and runs nothing.
     error_estimate: also rerun the batch at step 2h (about half the cost again) and put the
         step-doubling estimate of the velocity error in ``meta["error_estimate_rel"]`` ([R],
         relative L2 of the worst cylinder, see :func:`sim_backend.dem.errors.step_doubling_error`).
@@ -334,23 +291,15 @@ def simulate(
     if not (math.isfinite(dt_req) and dt_req > 0):
         raise ValueError(f"dt_s must be > 0, got {dt_s!r}")
     n_sub, h = steps_per_sample(dt_req, sample_rate_Hz)
-    check_h = dt_s is not None and refuse_unstable  # an explicit step: refuse an unstable one
-    check_2h = error_estimate and "velocity" in record  # the rerun at 2h checks its step
-    # a fresh process: the scans run while the kernel loads, joined before it runs
-    ahead = _scan_ahead(chain, name, h, sample_rate_Hz, drives, check_h, check_2h)
-    try:
-        if ahead is None and check_h:
-            check_step(chain, name, h, drives)
-        return _simulate(
-            chain, drives, modes, name, order, a_w, b_w, h, n_sub, ahead, check_h, t_wall,
-            duration_s=duration_s, sample_rate_Hz=sample_rate_Hz, cylinders=cylinders,
-            error_estimate=error_estimate, record=record,
-            stop_energy_fraction=stop_energy_fraction, stop_check_s=stop_check_s,
-            dashpot_kick=dashpot_kick, split_at_burst_ends=split_at_burst_ends,
-        )  # fmt: skip
-    finally:
-        if ahead is not None:  # no thread left behind (an error before the kernel: its own)
-            ahead.join(raise_error=False)
+    if dt_s is not None and refuse_unstable:  # an explicit step: refused before anything runs
+        check_step(chain, name, h, drives)
+    return _simulate(
+        chain, drives, modes, name, order, a_w, b_w, h, n_sub, t_wall,
+        duration_s=duration_s, sample_rate_Hz=sample_rate_Hz, cylinders=cylinders,
+        error_estimate=error_estimate, record=record,
+        stop_energy_fraction=stop_energy_fraction, stop_check_s=stop_check_s,
+        dashpot_kick=dashpot_kick, split_at_burst_ends=split_at_burst_ends,
+    )  # fmt: skip
 
 
 def _simulate(
@@ -363,8 +312,6 @@ def _simulate(
     b_w: tuple[float, ...],
     h: float,
     n_sub: int,
-    ahead: ScanAhead | None,
-    check_h: bool,
     t_wall: float,
     *,
     duration_s: float,
@@ -449,15 +396,6 @@ def _simulate(
         1 if dashpot_kick == "heun3" else 0, 1 if split_at_burst_ends else 0,
     )  # fmt: skip
     with _KERNEL_LOCK, compile_notice():
-        if ahead is not None:
-            try:
-                _load_kernel(args)  # while the stability scans run
-            except BaseException:
-                ahead.join(raise_error=False)
-                raise
-            ahead.join()  # the scans' errors, here
-            if check_h:  # from memory now: an unstable step is refused before the run
-                check_step(chain, name, h, drives)
         run_batch(*args)
     n_done = energy[:, 3].astype(np.int64)
     if stop_every > 0:

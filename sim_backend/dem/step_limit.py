@@ -63,7 +63,6 @@ from __future__ import annotations
 
 import hashlib
 import math
-import threading
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -80,7 +79,6 @@ from sim_backend.dem.threads import one_blas_thread
 
 __all__ = [
     "DEFAULT_OVERLAP_MARGIN",
-    "ScanAhead",
     "StepLimit",
     "StepTooLargeError",
     "certificate_applies",
@@ -90,7 +88,6 @@ __all__ = [
     "largest_stable_step",
     "range_key",
     "reference_overlap_m",
-    "scan_needed",
     "scan_range",
     "spectral_radius",
     "stable_up_to",
@@ -633,59 +630,6 @@ def _verdict(key: str, chain: Chain, overlap_m: float) -> _RangeVerdict:
             _RANGE_CACHE.clear()
         _RANGE_CACHE[key] = v
     return v
-
-
-def scan_needed(chain: Chain, integrator: str, h: float, overlap_m: float) -> bool:
-    """Whether :func:`stable_up_to` would scan (no verdict for step ``h`` (s) up to ``overlap_m``
-    (m) in memory, in the user's cache folder or shipped), so that a caller can start that scan
-    early (:func:`sim_backend.dem.simulation.simulate` does, while it loads the kernel)."""
-    v = _verdict(range_key(chain, integrator, h), chain, overlap_m)
-    return v.stable_to_m < overlap_m < v.unstable_at_m
-
-
-class ScanAhead:
-    """The stability scans of ``steps`` (s) up to ``overlap_m`` (m) (:func:`stable_up_to`), run in
-    a background thread while the caller does something else (``simulate`` loads its kernel);
-    :meth:`join` waits for them and raises what they raised. The verdicts land where
-    :func:`stable_up_to` keeps them, so the caller's own :func:`check_step` afterwards is served
-    from memory (and refuses an unstable step there, as always).
-
-    Built for the compiled grid scan, whose arithmetic ran without the GIL. The grid is numpy and
-    LAPACK now, and a first ``simulate`` whose error estimate's step 2h needs it took 0.335 s
-    with the scan ahead, 0.332 s in turn and 0.327 s with the verdict cached (medians of 25
-    interleaved fresh processes, 2026-11-27): no gain left to measure, kept for now. ``simulate``
-    starts none for a step the certificate answers (:func:`certificate_applies`), where the
-    thread contended for the GIL with the kernel's load (+6.4 ms ahead against +0.1 ms in
-    turn)."""
-
-    def __init__(
-        self, chain: Chain, integrator: str, steps: Sequence[float], overlap_m: float
-    ) -> None:
-        self._error: BaseException | None = None
-        self._thread = threading.Thread(
-            target=self._run,
-            args=(chain, integrator, tuple(steps), overlap_m),
-            name="biafc-step-stability",
-            daemon=True,
-        )
-        self._thread.start()
-
-    def _run(
-        self, chain: Chain, integrator: str, steps: tuple[float, ...], overlap_m: float
-    ) -> None:
-        try:
-            for h in steps:
-                if not stable_up_to(chain, integrator, h, overlap_m):
-                    break  # unstable: the caller refuses it; the larger steps need no verdict
-        except BaseException as exc:  # raised again by join, in the caller's thread
-            self._error = exc
-
-    def join(self, raise_error: bool = True) -> None:
-        """Wait for the scans; raise their exception (``raise_error``)."""
-        self._thread.join()
-        error, self._error = self._error, None
-        if error is not None and raise_error:
-            raise error
 
 
 def stable_up_to(chain: Chain, integrator: str, h: float, overlap_m: float) -> bool:

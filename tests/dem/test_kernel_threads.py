@@ -122,15 +122,3 @@ def test_no_kernel_function_is_compiled_with_parallel() -> None:
     }
     assert "sim_backend.dem.kernel.run_chunks" in found
     assert [name for name, d in found.items() if d.targetoptions.get("parallel")] == []
-
-
-def test_load_for_compiles_the_signature_that_run_batch_runs() -> None:
-    """``simulate`` loads the kernel ahead (``kernel.load_for``) while its stability scans run:
-    a different specialisation would be compiled again at the run."""
-    args = list(_args())
-    kernel.load_for(*args)
-    loaded = set(kernel.run_chunks.signatures)
-    for i in OUTPUTS:
-        args[i] = np.zeros_like(args[i])
-    kernel.run_batch(*args)
-    assert set(kernel.run_chunks.signatures) == loaded
