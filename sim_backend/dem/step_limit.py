@@ -14,7 +14,7 @@ numpy and LAPACK only (nothing to compile): every splitting here is a palindrome
 reach (:func:`sim_backend.dem.stability_certificate.half_map`), and the position blocks below are
 ``A = Xd^T Xa + Xb^T Xc``, ``B = 2 Xb^T Xd`` (:func:`_position_blocks`; the numpy
 :func:`_step_map` builds the whole map for a splitting that is not symmetric, and the compiled
-:mod:`sim_backend.dem.step_map`, stage by stage, is the tests' independent reference). Every
+:mod:`tests.dem.step_map`, stage by stage, is the tests' independent reference). Every
 splitting here is symmetric, so its step map ``M = [[A, B], [C, A^T]]`` is time-reversible as
 well as symplectic: ``R M R = M^-1`` with ``R = diag(I, -I)``. Then ``M + M^-1 = diag(2A,
 2A^T)``, so the eigenvalues of ``M`` are the pairs ``lambda = c +- sqrt(c^2 - 1)`` of the
@@ -311,7 +311,7 @@ def _position_blocks(
     contact stiffnesses (N/m), from half a step's map ``X``
     (:func:`sim_backend.dem.stability_certificate.half_map`): ``A = Xd^T Xa + Xb^T Xc``,
     ``B = 2 Xb^T Xd`` (``M = R X^-1 R X``). numpy and BLAS, nothing compiled (the compiled
-    :func:`sim_backend.dem.step_map.position_blocks`, built stage by stage, is the tests'
+    :func:`tests.dem.step_map.position_blocks`, built stage by stage, is the tests'
     independent reference). symmetric_b: ``B``'s symmetric part (symmetric to round-off)."""
     from sim_backend.dem.simulation import INTEGRATORS
 

@@ -1,4 +1,4 @@
-"""The compiled step map (:mod:`sim_backend.dem.step_map`) as the tests' independent reference
+"""The compiled step map (:mod:`tests.dem.step_map`) as the tests' independent reference
 for the stability check's half-step blocks: its stage arguments for a chain window."""
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from sim_backend.dem.step_limit import _Window
 def stages(
     win: _Window, integrator: str, h: float
 ) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.float64]]:
-    """The splitting's stages at step ``h`` (s) on ``win`` for :mod:`sim_backend.dem.step_map`:
+    """The splitting's stages at step ``h`` (s) on ``win`` for :mod:`tests.dem.step_map`:
     the drift coefficients of its distinct drift lengths ([S, D, 4]), which of them each drift
     uses ([m + 1]) and the kick lengths ``b_s h`` ([m], s)."""
     _, a_w, b_w = INTEGRATORS[integrator]

@@ -375,7 +375,7 @@ def _compiled_window_verdicts(
     """The verdicts of the compiled map and test (``step_map.stability_codes``, built stage by
     stage on the band), the eigenvalues of its blocks where a factorisation failed: the path the
     check took before the half-step blocks, kept as an independent implementation."""
-    from sim_backend.dem.step_map import STABLE, UNDECIDED, stability_codes
+    from tests.dem.step_map import STABLE, UNDECIDED, stability_codes
 
     coef, idx, kick = stages(win, integrator, h)
     codes, A, Bs = stability_codes(win.phi, coef, idx, kick, ks, win.left, win.right,
@@ -404,7 +404,7 @@ def test_half_step_verdicts_equal_the_compiled_ones(undamped: dem.Chain, integra
             seen.update(got)
     assert seen == {True, False}
     coef, idx, kick = stages(win, integrator, 6.5e-6)
-    from sim_backend.dem.step_map import position_blocks
+    from tests.dem.step_map import position_blocks
 
     A, B = position_blocks(win.phi, coef, idx, kick, ks, win.left, win.right)
     A2, B2 = step_limit._position_blocks(win, integrator, 6.5e-6, ks)
@@ -441,7 +441,8 @@ def test_block_modes_are_computed_once_per_chain_and_read_only(
 def test_a_refusal_on_a_chain_that_ships_nothing_loads_no_compiled_stability_code() -> None:
     """A fresh process refuses an unstable step on a chain that ships no verdicts (the grid scan
     and the search for the largest stable step, which the certificate does not answer) without
-    the compiled step map: on a fresh install it compiled for 3 s before the refusal."""
+    loading or compiling any compiled code: the compiled step map (now ``tests/dem/step_map.py``,
+    the tests' reference) compiled for 3 s on a fresh install before the refusal."""
     import os
     import subprocess
     import sys
@@ -456,11 +457,16 @@ def test_a_refusal_on_a_chain_that_ships_nothing_loads_no_compiled_stability_cod
         "    step_limit.check_step(chain, 'blanes-moan4', 50e-6)\n"
         "except step_limit.StepTooLargeError as exc:\n"
         "    print('refused', round(exc.h_max_s * 1e6, 3))\n"
-        "print('step map loaded', 'sim_backend.dem.step_map' in sys.modules)\n"
+        "import numba\n"
+        "compiled = sorted(n for m in list(sys.modules.values())\n"
+        "                  if getattr(m, '__name__', '').startswith('sim_backend')\n"
+        "                  for n, o in vars(m).items()\n"
+        "                  if isinstance(o, numba.core.registry.CPUDispatcher) and o.signatures)\n"
+        "print('compiled code loaded', compiled)\n"
     )
     root = Path(__file__).resolve().parents[2]
     env = {k: v for k, v in os.environ.items() if not k.startswith("NUMBA_CACHE")}
     out = subprocess.run([sys.executable, "-c", probe], env=env, cwd=root, capture_output=True,
                          text=True, check=True, timeout=300)  # fmt: skip
     assert "refused 6." in out.stdout, out.stdout
-    assert "step map loaded False" in out.stdout, out.stdout
+    assert "compiled code loaded []" in out.stdout, out.stdout

@@ -29,8 +29,8 @@ from sim_backend.dem.stability_certificate import (
     half_map,
     half_stages,
 )
-from sim_backend.dem.step_map import STABLE, stability_codes
 from tests.dem.compiled_reference import stages
+from tests.dem.step_map import STABLE, stability_codes
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -318,7 +318,7 @@ def test_with_or_without_the_certificate_the_verdicts_agree(
 
 def test_a_fresh_process_checks_without_loading_compiled_code(tmp_path: Path) -> None:
     """``check_step`` on a chain that does not ship, in a new process with an empty cache folder:
-    the verdict is certified and stored, no compiled stability code is imported."""
+    the verdict is certified and stored, and no compiled code is loaded or compiled."""
     probe = """
 import json, sys
 from instruments.burst import Burst
@@ -327,12 +327,17 @@ from sim_backend.dem import step_limit
 chain = dem.build_chain(dem.load_chain_with_settings(None, ["preload=6 N"]))
 d = dem.Drive("ltr", "displacement", 3e-6, burst=Burst(8.92e3))
 step_limit.check_step(chain, "blanes-moan4", 5e-6, [d])
-print(json.dumps({"step_map": "sim_backend.dem.step_map" in sys.modules}))
+import numba
+compiled = sorted(n for m in list(sys.modules.values())
+                  if getattr(m, "__name__", "").startswith("sim_backend")
+                  for n, o in vars(m).items()
+                  if isinstance(o, numba.core.registry.CPUDispatcher) and o.signatures)
+print(json.dumps({"compiled": compiled}))
 """
     env = dict(os.environ, BIAFC_CACHE_DIR=str(tmp_path))
     out = subprocess.run([sys.executable, "-c", probe], cwd=ROOT, env=env, capture_output=True,
                          text=True, check=True, timeout=300)  # fmt: skip
-    assert json.loads(out.stdout.strip().splitlines()[-1]) == {"step_map": False}
+    assert json.loads(out.stdout.strip().splitlines()[-1]) == {"compiled": []}
     # the background write finished before the process ended
     stored = json.loads((tmp_path / "step-stability.json").read_text())
     assert len(stored) == 1

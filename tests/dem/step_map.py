@@ -21,9 +21,9 @@ the caller decides by the eigenvalues.
 Since 2026-11-27 no check uses it: :mod:`sim_backend.dem.step_limit` builds the same blocks from
 half a step's map with numpy (:mod:`sim_backend.dem.stability_certificate`), which needs nothing
 compiled (this module compiled for 3 s on a fresh install before the first refusal of an unstable
-step, and took 5-8 ms to load in every new process). It stays as the independent implementation
-the tests compare those blocks and verdicts with (``tests/dem/test_setup_cost.py``,
-``tests/dem/test_stability_certificate.py``).
+step, and took 5-8 ms to load in every new process). It moved from ``sim_backend/dem`` to the
+tests, as the independent implementation they compare those blocks and verdicts with
+(``tests/dem/test_setup_cost.py``, ``tests/dem/test_stability_certificate.py``).
 
 Cost on the default chain (n = 31, K = 4, blanes-moan4: 7 drifts, 6 kicks), one thread: a scan of
 8 stiffnesses (blocks and factorisations) 2.2 ms, against 2.7 ms for the blocks here and the
