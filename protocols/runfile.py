@@ -17,6 +17,8 @@ and nowhere else. Layout (see the design notes)::
         time          [S] float64, s from the trigger
         velocity      [A, C, S] float32, m/s, mean over averages; NaN until measured
         drive         [A, C, S] float32, V (sim/dem: the applied drive in its own unit, attr units)
+                      (velocity and drive: one chunk a point, each with a Fletcher-32 checksum
+                      that HDF5 checks at every read; files before 2026-11-27 have none)
         done          [A, C] uint8: 0 pending, 1 measured and flushed, 2 failed
         measured_at   [A, C] float64, unix time (NaN until measured)
     /log              (time, level, message) rows, resizable
@@ -322,15 +324,19 @@ class RunFileWriter:
         t = g.create_dataset("time", data=np.asarray(spec.time_s, dtype=np.float64))
         t.attrs["units"] = "s"
         t.attrs["long_name"] = "time from the trigger"
+        # one chunk a point, each with its Fletcher-32 checksum: HDF5 checks it at every read, so
+        # bytes damaged on disk inside a point's records are refused, not read as data
         chunks = (1, 1, S)
         v = g.create_dataset(
-            "velocity", shape=(A, C, S), dtype=np.float32, fillvalue=np.nan, chunks=chunks
-        )
+            "velocity", shape=(A, C, S), dtype=np.float32, fillvalue=np.nan, chunks=chunks,
+            fletcher32=True,
+        )  # fmt: skip
         v.attrs["units"] = "m/s"
         v.attrs["long_name"] = "velocity (mean over averages)"
         d = g.create_dataset(
-            "drive", shape=(A, C, S), dtype=np.float32, fillvalue=np.nan, chunks=chunks
-        )
+            "drive", shape=(A, C, S), dtype=np.float32, fillvalue=np.nan, chunks=chunks,
+            fletcher32=True,
+        )  # fmt: skip
         d.attrs["units"] = spec.drive_units
         d.attrs["long_name"] = "drive reference"
         g.create_dataset("done", shape=(A, C), dtype=np.uint8, fillvalue=0)
@@ -619,6 +625,35 @@ def _damaged(path: Path, exc: BaseException) -> str:
     return f"{path}: damaged HDF5 file, cannot be read ({why})"
 
 
+def _read_records(path: Path, direction: str, g: h5py.Group, name: str) -> np.ndarray:
+    """The records ``name`` ([A, C, S]) of scan ``g``. A point whose chunk fails its Fletcher-32
+    checksum (bytes damaged on disk; files written since 2026-11-27 carry one a point) is
+    refused in one line naming the file and the points, found by reading them one by one."""
+    ds = g[name]
+    try:
+        return np.asarray(ds[...])
+    except OSError as exc:
+        if not ds.fletcher32:
+            raise  # no checksums in this file: its damage (one_line_errors)
+        error = exc
+    amps, cyls = g["amplitudes"][...], g["cylinders"][...]
+    units = str(g["amplitudes"].attrs.get("units", ""))
+    bad: list[str] = []
+    for a in range(ds.shape[0]):
+        for c in range(ds.shape[1]):
+            try:
+                ds[a, c]
+            except OSError:
+                bad.append(f"amplitude #{a + 1} ({amps[a]:g} {units}) cylinder {int(cyls[c])}")
+    if not bad:
+        raise error  # every point reads alone: some other damage (one_line_errors)
+    listed = "; ".join(bad[:4]) + (f"; and {len(bad) - 4} more" if len(bad) > 4 else "")
+    raise RunFileError(
+        f"{path}: {name} records of {len(bad)} {direction} point(s) fail their checksum "
+        f"(damaged on disk; the other points are intact): {listed}"
+    )
+
+
 def _read_run(path: Path, f: h5py.File) -> RunData:
     attrs = _attr_dict(f)
     snapshot = json.loads(f["snapshot"].attrs.get("json", "{}"))
@@ -645,8 +680,8 @@ def _read_run(path: Path, f: h5py.File) -> RunData:
             amplitude_units=str(g["amplitudes"].attrs.get("units", "")),
             cylinders=g["cylinders"][...],
             time_s=g["time"][...],
-            velocity=g["velocity"][...],
-            drive=g["drive"][...],
+            velocity=_read_records(path, direction, g, "velocity"),
+            drive=_read_records(path, direction, g, "drive"),
             drive_units=str(g["drive"].attrs.get("units", "")),
             done=g["done"][...],
             measured_at=g["measured_at"][...],

@@ -1,0 +1,95 @@
+"""Bytes damaged on disk inside a point's records (the velocity or drive samples): every point's
+chunk carries a Fletcher-32 checksum (``protocols/runfile.py``), so reading the file refuses it
+in one line naming the file and the damaged points, where HDF5, which keeps no checksum of raw
+data by default, read the damaged bytes as data (docs/reliability.md: 44 of 67 overwrites)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from daq.cli.biafc import main as biafc
+from protocols.runfile import ChainInfo, RunFileError, RunFileWriter, ScanSpec, read_run
+
+S = 2000
+
+
+def _complete(path: Path) -> None:
+    """A complete run file: ltr, 2 amplitudes x 3 cylinders, every point measured."""
+    n = 31
+    chain = ChainInfo(
+        lengths_m=np.linspace(0.09, 0.11, n), diameter_m=0.0136, f0_N=5.0, beta_c=1e9,
+        onset_Hz=np.full(n, 8e3), cutoff_Hz=np.full(n, 1e4),
+    )  # fmt: skip
+    t = np.arange(S) / 200e3
+    spec = ScanSpec("ltr", np.array([1e-6, 2e-6]), "m", np.arange(29, 32, dtype=np.int32), t,
+                    8920.0, cycles=21.0, drive_units="m")  # fmt: skip
+    w = RunFileWriter.create(path, backend="sim", chain=chain, scans=[spec])
+    try:
+        for a in range(2):
+            for c in range(3):
+                w.write_point("ltr", a, c, np.sin(np.arange(S) * 0.3 * (a + 1)),
+                              np.cos(np.arange(S) * 0.3))  # fmt: skip
+    finally:
+        w.close("complete")
+
+
+def _damage(path: Path, name: str, a: int, c: int) -> None:
+    """Flip 8 bytes in the middle of point (a, c)'s chunk of ``name``."""
+    with h5py.File(path, "r") as f:
+        ds = f["scan/ltr"][name]
+        info = ds.id.get_chunk_info_by_coord((a, c, 0))
+    with open(path, "r+b") as fh:
+        fh.seek(info.byte_offset + info.size // 2)
+        raw = fh.read(8)
+        fh.seek(info.byte_offset + info.size // 2)
+        fh.write(bytes(b ^ 0xFF for b in raw))
+
+
+@pytest.fixture()
+def run_file(tmp_path: Path) -> Path:
+    path = tmp_path / "run.h5"
+    _complete(path)
+    return path
+
+
+def test_the_records_carry_a_checksum_a_point(run_file: Path) -> None:
+    with h5py.File(run_file, "r") as f:
+        for name in ("velocity", "drive"):
+            ds = f["scan/ltr"][name]
+            assert ds.fletcher32 and ds.chunks == (1, 1, S)
+
+
+@pytest.mark.parametrize("name", ["velocity", "drive"])
+def test_damaged_records_are_refused_naming_the_point(run_file: Path, name: str) -> None:
+    good = read_run(run_file).scans["ltr"]
+    _damage(run_file, name, 1, 2)
+    with pytest.raises(RunFileError) as err:
+        read_run(run_file)  # read the flipped bytes as data before
+    msg = str(err.value)
+    assert str(run_file) in msg and "\n" not in msg
+    assert f"{name} records of 1 ltr point(s) fail their checksum" in msg
+    assert "amplitude #2 (2e-06 m) cylinder 31" in msg
+    # the other points still read, and are what was written
+    with h5py.File(run_file, "r") as f:
+        ds = f["scan/ltr"][name]
+        assert np.array_equal(ds[0], getattr(good, name)[0])
+        assert np.array_equal(ds[1, :2], getattr(good, name)[1, :2])
+
+
+def test_figures_refuse_a_file_with_damaged_records_in_one_line(
+    run_file: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    _damage(run_file, "velocity", 0, 0)
+    _damage(run_file, "velocity", 1, 1)
+    code = biafc(["figures", str(run_file), "--out", str(tmp_path / "figs")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2
+    assert len(err) == 1 and str(run_file) in err[0], err
+    assert "2 ltr point(s) fail their checksum" in err[0]
+    assert "amplitude #1 (1e-06 m) cylinder 29" in err[0]
+    assert "amplitude #2 (2e-06 m) cylinder 30" in err[0]
+    assert not (tmp_path / "figs").exists()
