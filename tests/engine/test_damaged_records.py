@@ -93,3 +93,43 @@ def test_figures_refuse_a_file_with_damaged_records_in_one_line(
     assert "amplitude #1 (1e-06 m) cylinder 29" in err[0]
     assert "amplitude #2 (2e-06 m) cylinder 30" in err[0]
     assert not (tmp_path / "figs").exists()
+
+
+def test_resume_refuses_a_killed_run_whose_records_are_damaged(tmp_path: Path) -> None:
+    """A writer killed after 2 points, then bytes flipped inside a measured point's records:
+    ``--resume`` refuses to continue the file (exit 2), in one line naming the point, where it
+    went on before and left the damaged point marked measured."""
+    import os
+    import subprocess
+    import sys
+
+    from protocols.swmr_read import open_swmr
+
+    from .helpers import PROTOCOL
+    from .test_cli import TESTS, _spawn, _wait_done
+
+    proto = tmp_path / "proto.yaml"
+    proto.write_text(PROTOCOL)
+    path = tmp_path / "k.h5"
+    proc = _spawn([str(proto), "--out", str(path), "--seed", "5"])
+    try:
+        _wait_done(path, 2, proc)
+    finally:
+        proc.kill()
+        proc.wait(10)
+    with open_swmr(path) as f:
+        info = f["scan/ltr/velocity"].id.get_chunk_info_by_coord((0, 0, 0))
+        assert f["scan/ltr/done"][0, 0] == 1
+    with open(path, "r+b") as fh:
+        fh.seek(info.byte_offset + info.size // 2)
+        raw = fh.read(8)
+        fh.seek(info.byte_offset + info.size // 2)
+        fh.write(bytes(b ^ 0xFF for b in raw))
+    env = dict(os.environ, FAKE_READ_S="0.01", PYTHONPATH=str(TESTS))
+    cmd = [sys.executable, "-m", "engine.fake_cli", "--resume", str(path)]
+    res = subprocess.run(cmd, cwd=TESTS, env=env, capture_output=True, text=True, timeout=120)
+    assert res.returncode == 2, res.stdout + res.stderr
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and "cannot be continued" in lines[0], res.stderr
+    assert "velocity records of 1 ltr point(s) fail their checksum" in lines[0]
+    assert "amplitude #1 (1 V) cylinder 1" in lines[0]
