@@ -8,20 +8,16 @@ import h5py
 import numpy as np
 import pytest
 
-from protocols.runfile import ChainInfo, RunFileWriter, ScanSpec
+from protocols.runfile import RunFileWriter, ScanSpec
+from tests.engine.helpers import chain_info
 
 
 def write_small_run(path: Path) -> Path:
     """A complete run file: one direction, 2 amplitudes x 3 cylinders x 400 samples."""
-    n = 31
-    chain = ChainInfo(
-        lengths_m=np.linspace(0.09, 0.11, n), diameter_m=0.0136, f0_N=5.0, beta_c=1.0e9,
-        onset_Hz=np.full(n, 8000.0), cutoff_Hz=np.full(n, 10000.0),
-    )  # fmt: skip
     t = np.arange(400) / 200e3
     spec = ScanSpec("ltr", np.array([0.5e-6, 3e-6]), "m", np.array([1, 8, 16], np.int32), t,
                     8920.0, cycles=21.0, drive_units="m")  # fmt: skip
-    w = RunFileWriter.create(path, backend="sim", chain=chain, scans=[spec],
+    w = RunFileWriter.create(path, backend="sim", chain=chain_info(), scans=[spec],
                              protocol_yaml="name: smoke\n", bench_yaml="name: sim\n")  # fmt: skip
     rng = np.random.default_rng(0)
     for a in range(2):

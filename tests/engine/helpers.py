@@ -1,7 +1,12 @@
-"""Protocol text for the engine tests."""
+"""Protocol text, a chain header and a killed run for the engine tests (and others)."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
+import numpy as np
+
+from protocols.runfile import ChainInfo
 from protocols.schema import ProtocolFile, parse_protocol
 
 PROTOCOL = """\
@@ -25,3 +30,29 @@ def make_protocol(text: str = PROTOCOL, **replace: str) -> ProtocolFile:
     for old, new in replace.items():
         text = text.replace(old, new)
     return parse_protocol(text, "test_protocol.yaml")
+
+
+def chain_info(n: int = 31) -> ChainInfo:
+    """The chain header of a synthetic run file: ``n`` cylinders graded 90-110 mm, 13.6 mm
+    across, F0 = 5 N, flat quasi-band edges (8 and 10 kHz)."""
+    return ChainInfo(
+        lengths_m=np.linspace(0.09, 0.11, n), diameter_m=0.0136, f0_N=5.0, beta_c=1e9,
+        onset_Hz=np.full(n, 8e3), cutoff_Hz=np.full(n, 1e4),
+    )  # fmt: skip
+
+
+def killed_run(folder: Path, points: int = 2) -> Path:
+    """``folder/k.h5``: :data:`PROTOCOL` run on the fake bench (``engine.fake_cli``), its writer
+    SIGKILLed once ``points`` points of ltr are measured."""
+    from .test_cli import _spawn, _wait_done
+
+    proto = folder / "proto.yaml"
+    proto.write_text(PROTOCOL)
+    path = folder / "k.h5"
+    proc = _spawn([str(proto), "--out", str(path), "--seed", "5"])
+    try:
+        _wait_done(path, points, proc)
+    finally:
+        proc.kill()
+        proc.wait(10)
+    return path

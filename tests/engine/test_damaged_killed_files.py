@@ -19,7 +19,7 @@ from protocols.recover import has_consistency_flags
 from protocols.runfile import read_run
 from protocols.swmr_read import open_swmr, retry_bound_available
 
-from .helpers import PROTOCOL
+from .helpers import PROTOCOL, killed_run
 from .test_cli import _spawn, _wait_done
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -30,16 +30,7 @@ LIMIT_S = 30.0
 @pytest.fixture(scope="module")
 def killed(tmp_path_factory: pytest.TempPathFactory) -> bytes:
     """The bytes of a run file whose writer was SIGKILLed after 2 points."""
-    d = tmp_path_factory.mktemp("killed")
-    proto = d / "proto.yaml"
-    proto.write_text(PROTOCOL)
-    path = d / "k.h5"
-    proc = _spawn([str(proto), "--out", str(path), "--seed", "5"])
-    try:
-        _wait_done(path, 2, proc)
-    finally:
-        proc.kill()
-        proc.wait(10)
+    path = killed_run(tmp_path_factory.mktemp("killed"), 2)
     assert has_consistency_flags(path)  # the killed writer's SWMR flags are set
     return path.read_bytes()
 

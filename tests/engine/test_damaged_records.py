@@ -12,22 +12,19 @@ import numpy as np
 import pytest
 
 from daq.cli.biafc import main as biafc
-from protocols.runfile import ChainInfo, RunFileError, RunFileWriter, ScanSpec, read_run
+from protocols.runfile import RunFileError, RunFileWriter, ScanSpec, read_run
+
+from .helpers import chain_info
 
 S = 2000
 
 
 def _complete(path: Path) -> None:
     """A complete run file: ltr, 2 amplitudes x 3 cylinders, every point measured."""
-    n = 31
-    chain = ChainInfo(
-        lengths_m=np.linspace(0.09, 0.11, n), diameter_m=0.0136, f0_N=5.0, beta_c=1e9,
-        onset_Hz=np.full(n, 8e3), cutoff_Hz=np.full(n, 1e4),
-    )  # fmt: skip
     t = np.arange(S) / 200e3
     spec = ScanSpec("ltr", np.array([1e-6, 2e-6]), "m", np.arange(29, 32, dtype=np.int32), t,
                     8920.0, cycles=21.0, drive_units="m")  # fmt: skip
-    w = RunFileWriter.create(path, backend="sim", chain=chain, scans=[spec])
+    w = RunFileWriter.create(path, backend="sim", chain=chain_info(), scans=[spec])
     try:
         for a in range(2):
             for c in range(3):
@@ -105,18 +102,10 @@ def test_resume_refuses_a_killed_run_whose_records_are_damaged(tmp_path: Path) -
 
     from protocols.swmr_read import open_swmr
 
-    from .helpers import PROTOCOL
-    from .test_cli import TESTS, _spawn, _wait_done
+    from .helpers import killed_run
+    from .test_cli import TESTS
 
-    proto = tmp_path / "proto.yaml"
-    proto.write_text(PROTOCOL)
-    path = tmp_path / "k.h5"
-    proc = _spawn([str(proto), "--out", str(path), "--seed", "5"])
-    try:
-        _wait_done(path, 2, proc)
-    finally:
-        proc.kill()
-        proc.wait(10)
+    path = killed_run(tmp_path, 2)
     with open_swmr(path) as f:
         info = f["scan/ltr/velocity"].id.get_chunk_info_by_coord((0, 0, 0))
         assert f["scan/ltr/done"][0, 0] == 1

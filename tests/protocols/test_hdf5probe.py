@@ -12,19 +12,15 @@ import numpy as np
 import pytest
 
 from protocols.hdf5probe import HDF5ProbeError, probe_hdf5
-from protocols.runfile import ChainInfo, RunFileError, RunFileWriter, ScanSpec, read_run
+from protocols.runfile import RunFileError, RunFileWriter, ScanSpec, read_run
+from tests.engine.helpers import chain_info
 
 
 def _writer(path: Path) -> RunFileWriter:
-    n = 31
-    chain = ChainInfo(
-        lengths_m=np.linspace(0.09, 0.11, n), diameter_m=0.0136, f0_N=5.0, beta_c=1e9,
-        onset_Hz=np.full(n, 8e3), cutoff_Hz=np.full(n, 1e4),
-    )  # fmt: skip
     t = np.arange(2000) / 200e3
     spec = ScanSpec("ltr", np.array([1e-6, 2e-6]), "m", np.arange(1, 6, dtype=np.int32), t,
                     8920.0, cycles=21.0, drive_units="m")  # fmt: skip
-    return RunFileWriter.create(path, backend="sim", chain=chain, scans=[spec])
+    return RunFileWriter.create(path, backend="sim", chain=chain_info(), scans=[spec])
 
 
 def test_a_file_being_written_reads_at_every_point(tmp_path: Path) -> None:
