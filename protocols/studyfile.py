@@ -13,6 +13,8 @@ Layout (``format = "biafc-study"``, ``format_version = 1`` on the root)::
     /cells/message        [n_cells] str
     /metrics/<name>       [n_cells] float64, NaN until run (attrs unit, description)
     /spectra/freq_Hz      [F] (only with record_spectra); /spectra/<dir> [n_cells, F] float32
+    (status, metrics and spectra: chunked, each chunk with a Fletcher-32 checksum that HDF5
+    checks at every read; outputs before 2026-11-27 have none)
     /tasks/wall_s         [n_tasks] float64 (NaN until run); /tasks/worker [n_tasks] str
 
 Writing follows the run files' discipline (:mod:`protocols.runfile`): the layout is made under a
@@ -161,11 +163,15 @@ class StudyStore:
             g.attrs["order"] = json.dumps(list(table.names))
             c = f.create_group("cells")
             c.create_dataset("point", data=table.point)
-            c.create_dataset("status", shape=(n,), dtype="i1", fillvalue=0, chunks=chunk)
+            # the per-cell results carry HDF5's Fletcher-32 checksum, a chunk each, checked at every
+            # read: bytes damaged on disk are refused (one_line_errors), not read as results
+            c.create_dataset("status", shape=(n,), dtype="i1", fillvalue=0, chunks=chunk,
+                             fletcher32=True)  # fmt: skip
             c.create_dataset("message", shape=(n,), dtype=h5py.string_dtype(), chunks=chunk)
             m = f.create_group("metrics")
             for mname in metric_names:
-                ds = m.create_dataset(mname, shape=(n,), dtype="f8", fillvalue=np.nan, chunks=chunk)
+                ds = m.create_dataset(mname, shape=(n,), dtype="f8", fillvalue=np.nan, chunks=chunk,
+                                      fletcher32=True)  # fmt: skip
                 ds.attrs["unit"] = _unit(mname)
                 ds.attrs["description"] = _description(mname)
             m.attrs["order"] = json.dumps(list(metric_names))
@@ -175,7 +181,7 @@ class StudyStore:
                 for d in directions:
                     s.create_dataset(
                         d, shape=(n, spectrum_freq_Hz.size), dtype="f4", fillvalue=np.nan,
-                        chunks=(min(n, 64), spectrum_freq_Hz.size),
+                        chunks=(min(n, 64), spectrum_freq_Hz.size), fletcher32=True,
                     ).attrs["unit"] = "m"  # fmt: skip
             t = f.create_group("tasks")
             t.create_dataset("wall_s", shape=(n_tasks,), dtype="f8", fillvalue=np.nan)

@@ -117,3 +117,29 @@ def test_a_chain_no_cell_can_have_is_refused_before_any_task(
     assert len(err.splitlines()) == 1
     assert f"{p}:6: parameters.preload: no chain for" in err and "contact_dashpot_ratio" in err
     assert not out.exists()
+
+
+def test_damaged_results_are_refused_in_one_line(
+    serial_reference: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Bytes flipped on disk inside a study's metrics: every per-cell dataset carries a
+    Fletcher-32 checksum, so ``biafc figures`` refuses the file in one line (exit 2) where the
+    flipped bytes read as results before."""
+    import h5py
+
+    path = tmp_path / "damaged.h5"
+    path.write_bytes(serial_reference.read_bytes())
+    with h5py.File(path, "r") as f:
+        info = f["metrics/asymmetry_ratio"].id.get_chunk_info(0)
+    with open(path, "r+b") as fh:
+        fh.seek(info.byte_offset + 8)
+        raw = fh.read(8)
+        fh.seek(info.byte_offset + 8)
+        fh.write(bytes(b ^ 0xFF for b in raw))
+    code = main(["figures", str(path), "--out", str(tmp_path / "figs")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2
+    assert len(err) == 1 and str(path) in err[0] and "damaged" in err[0], err
+    assert not (tmp_path / "figs").exists()
+    with h5py.File(serial_reference, "r") as f:
+        assert all(f[name].fletcher32 for name in ("cells/status", "metrics/asymmetry_ratio"))
