@@ -662,7 +662,8 @@ def stable_up_to(chain: Chain, integrator: str, h: float, overlap_m: float) -> b
     ahead = top
     for _ in range(CERTIFIED_AHEAD):
         ahead *= RANGE_RATIO
-    for d in (ahead, top):
+    tries = (ahead, top) if certificate_applies(chain, integrator, h) else ()
+    for d in tries:
         if d >= v.unstable_at_m:
             continue
         v.evaluations += 1
