@@ -324,21 +324,17 @@ class RunFileWriter:
         t = g.create_dataset("time", data=np.asarray(spec.time_s, dtype=np.float64))
         t.attrs["units"] = "s"
         t.attrs["long_name"] = "time from the trigger"
-        # one chunk a point, each with its Fletcher-32 checksum: HDF5 checks it at every read, so
-        # bytes damaged on disk inside a point's records are refused, not read as data
-        chunks = (1, 1, S)
-        v = g.create_dataset(
-            "velocity", shape=(A, C, S), dtype=np.float32, fillvalue=np.nan, chunks=chunks,
-            fletcher32=True,
-        )  # fmt: skip
-        v.attrs["units"] = "m/s"
-        v.attrs["long_name"] = "velocity (mean over averages)"
-        d = g.create_dataset(
-            "drive", shape=(A, C, S), dtype=np.float32, fillvalue=np.nan, chunks=chunks,
-            fletcher32=True,
-        )  # fmt: skip
-        d.attrs["units"] = spec.drive_units
-        d.attrs["long_name"] = "drive reference"
+        records = (
+            ("velocity", "m/s", "velocity (mean over averages)"),
+            ("drive", spec.drive_units, "drive reference"),
+        )
+        for name, units, long_name in records:
+            # one chunk a point, each with its Fletcher-32 checksum: HDF5 checks it at every
+            # read, so bytes damaged on disk inside a point's records are refused, not read
+            ds = g.create_dataset(name, shape=(A, C, S), dtype=np.float32, fillvalue=np.nan,
+                                  chunks=(1, 1, S), fletcher32=True)  # fmt: skip
+            ds.attrs["units"] = units
+            ds.attrs["long_name"] = long_name
         g.create_dataset("done", shape=(A, C), dtype=np.uint8, fillvalue=0)
         m = g.create_dataset("measured_at", shape=(A, C), dtype=np.float64, fillvalue=np.nan)
         m.attrs["units"] = "s since the unix epoch"
