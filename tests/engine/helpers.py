@@ -56,3 +56,12 @@ def killed_run(folder: Path, points: int = 2) -> Path:
         proc.kill()
         proc.wait(10)
     return path
+
+
+def flip_bytes(path: Path, offset: int, n: int = 8) -> None:
+    """Invert ``n`` bytes of the file ``path`` from ``offset`` on (damage on disk)."""
+    with open(path, "r+b") as fh:
+        fh.seek(offset)
+        raw = fh.read(n)
+        fh.seek(offset)
+        fh.write(bytes(b ^ 0xFF for b in raw))

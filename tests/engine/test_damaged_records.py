@@ -14,7 +14,7 @@ import pytest
 from daq.cli.biafc import main as biafc
 from protocols.runfile import RunFileError, RunFileWriter, ScanSpec, read_run
 
-from .helpers import chain_info
+from .helpers import chain_info, flip_bytes
 
 S = 2000
 
@@ -39,11 +39,7 @@ def _damage(path: Path, name: str, a: int, c: int) -> None:
     with h5py.File(path, "r") as f:
         ds = f["scan/ltr"][name]
         info = ds.id.get_chunk_info_by_coord((a, c, 0))
-    with open(path, "r+b") as fh:
-        fh.seek(info.byte_offset + info.size // 2)
-        raw = fh.read(8)
-        fh.seek(info.byte_offset + info.size // 2)
-        fh.write(bytes(b ^ 0xFF for b in raw))
+    flip_bytes(path, info.byte_offset + info.size // 2)
 
 
 @pytest.fixture()
@@ -109,11 +105,7 @@ def test_resume_refuses_a_killed_run_whose_records_are_damaged(tmp_path: Path) -
     with open_swmr(path) as f:
         info = f["scan/ltr/velocity"].id.get_chunk_info_by_coord((0, 0, 0))
         assert f["scan/ltr/done"][0, 0] == 1
-    with open(path, "r+b") as fh:
-        fh.seek(info.byte_offset + info.size // 2)
-        raw = fh.read(8)
-        fh.seek(info.byte_offset + info.size // 2)
-        fh.write(bytes(b ^ 0xFF for b in raw))
+    flip_bytes(path, info.byte_offset + info.size // 2)
     env = dict(os.environ, FAKE_READ_S="0.01", PYTHONPATH=str(TESTS))
     cmd = [sys.executable, "-m", "engine.fake_cli", "--resume", str(path)]
     res = subprocess.run(cmd, cwd=TESTS, env=env, capture_output=True, text=True, timeout=120)

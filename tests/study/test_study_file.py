@@ -127,15 +127,13 @@ def test_damaged_results_are_refused_in_one_line(
     flipped bytes read as results before."""
     import h5py
 
+    from tests.engine.helpers import flip_bytes
+
     path = tmp_path / "damaged.h5"
     path.write_bytes(serial_reference.read_bytes())
     with h5py.File(path, "r") as f:
         info = f["metrics/asymmetry_ratio"].id.get_chunk_info(0)
-    with open(path, "r+b") as fh:
-        fh.seek(info.byte_offset + 8)
-        raw = fh.read(8)
-        fh.seek(info.byte_offset + 8)
-        fh.write(bytes(b ^ 0xFF for b in raw))
+    flip_bytes(path, info.byte_offset + 8)
     code = main(["figures", str(path), "--out", str(tmp_path / "figs")])
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2
