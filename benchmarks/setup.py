@@ -26,7 +26,9 @@
   each pair with no verdict in the user cache (the check is computed: one stability certificate,
   in turn, after the kernel's load), the other with the verdict on disk. Reported: the medians,
   their difference and that difference as a fraction of the first ``simulate`` and of the run.
-- ``run_protocol smoke`` as a subprocess on the simulated bench: cold (an empty cache folder,
+- ``run_protocol smoke`` as a subprocess on the simulated bench, through the console script's
+  entry point (``daq.cli.entry``, which also settles the interpreter's shutdown,
+  :mod:`daq.cli.shutdown`): cold (an empty cache folder,
   ``$BIAFC_CACHE_DIR``: the kernel compiles) and warm (the same folder again), the time from the
   start of the process to its first measured point (the first ``point 1/`` line) and to its
   exit. Target: warm < 2 s.
@@ -316,7 +318,7 @@ def _smoke(cache: Path, out: Path, label: str) -> dict[str, Any]:
     load = _load()
     t0 = time.perf_counter()
     proc = subprocess.Popen(
-        [sys.executable, "-m", "daq.cli.run_protocol", "smoke", "--out", str(out)],
+        [sys.executable, "-m", "daq.cli.entry", "smoke", "--out", str(out)],  # the console script
         env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
     )  # fmt: skip
     first = None

@@ -1,3 +1,3 @@
-from daq.cli.biafc import main
+from daq.cli.shutdown import biafc
 
-raise SystemExit(main())
+raise SystemExit(biafc())

@@ -35,14 +35,17 @@ for _sig in (signal.SIGINT, signal.SIGTERM):
 
 def run_protocol() -> int:
     """``run_protocol``: :func:`daq.cli.run_protocol.main` (which handles Ctrl-C itself from
-    its first line); once it has returned, a late Ctrl-C no longer changes the exit status."""
+    its first line); once it has returned, a late Ctrl-C no longer changes the exit status,
+    and the interpreter's shutdown is made quick (:func:`daq.cli.shutdown.settle`)."""
     from daq.cli.run_protocol import main
+    from daq.cli.shutdown import settle
 
     try:
         return main()
     finally:
         signal.signal(signal.SIGINT, signal.SIG_IGN)  # the outcome is decided: keep its status
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        settle()
 
 
 if __name__ == "__main__":
