@@ -12,16 +12,30 @@ import math
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.signal import hilbert
 
-__all__ = ["decay_time", "envelope"]
+__all__ = ["analytic_signal", "decay_time", "envelope"]
+
+
+def analytic_signal(signal: ArrayLike) -> NDArray[np.complex128]:
+    """The analytic signal ``x + i H[x]`` of the real ``signal [..., S]`` along the last axis
+    (same unit and shape), by the FFT as ``scipy.signal.hilbert`` computes it: the spectrum's
+    positive frequencies doubled, its negative ones zeroed. Not imported from there, because
+    importing ``scipy.signal`` took 0.7-1.1 s of every command that draws a figure."""
+    x = np.asarray(signal, dtype=np.float64)
+    n = x.shape[-1]
+    if n == 0:
+        raise ValueError("the analytic signal of an empty record")
+    spectrum = np.fft.fft(x, axis=-1)
+    spectrum[..., 1 : (n + 1) // 2] *= 2.0
+    spectrum[..., n // 2 + 1 :] = 0.0  # n even: the Nyquist bin n/2 is kept once
+    return np.asarray(np.fft.ifft(spectrum, axis=-1), dtype=np.complex128)
 
 
 def envelope(signal: ArrayLike) -> NDArray[np.float64]:
     """|analytic signal| of ``signal [..., S]`` (same unit and shape); NaN records stay NaN."""
     x = np.asarray(signal, dtype=np.float64)
     bad = ~np.all(np.isfinite(x), axis=-1)
-    env = np.abs(hilbert(np.where(np.isfinite(x), x, 0.0), axis=-1))
+    env = np.abs(analytic_signal(np.where(np.isfinite(x), x, 0.0)))
     env[bad] = np.nan
     return np.asarray(env, dtype=np.float64)
 

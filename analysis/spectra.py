@@ -25,7 +25,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.signal import windows
 
 __all__ = [
     "PAD_FACTOR",
@@ -35,6 +34,7 @@ __all__ = [
     "n_fft_for",
     "peak_frequency",
     "spectrum_db",
+    "tukey",
     "window_for",
 ]
 
@@ -75,7 +75,26 @@ def n_fft_for(n_samples: int, pad_factor: int = PAD_FACTOR) -> int:
 
 def window_for(n_samples: int) -> NDArray[np.float64]:
     """The analysis window ``[n_samples]``: Tukey (``TUKEY_ALPHA``), 1 over its flat part."""
-    return np.asarray(windows.tukey(n_samples, TUKEY_ALPHA, sym=True), dtype=np.float64)
+    return tukey(n_samples, TUKEY_ALPHA)
+
+
+def tukey(n_samples: int, alpha: float) -> NDArray[np.float64]:
+    """The symmetric Tukey window ``[n_samples]`` of taper fraction ``alpha`` (0: rectangular,
+    1: Hann), by the formula of ``scipy.signal.windows.tukey(n_samples, alpha, sym=True)``,
+    which it equals (``tests/analysis/test_spectra.py``): not imported from there, because
+    importing ``scipy.signal`` took 0.7-1.1 s of every command that draws a spectrum."""
+    if n_samples <= 1 or alpha <= 0.0:
+        return np.ones(max(n_samples, 0))
+    if alpha >= 1.0:  # Hann, as scipy writes it
+        return 0.5 + 0.5 * np.cos(np.linspace(-np.pi, np.pi, n_samples))
+    n = np.arange(0, n_samples, dtype=np.float64)
+    width = math.floor(alpha * (n_samples - 1) / 2.0)
+    n1 = n[0 : width + 1]
+    n3 = n[n_samples - width - 1 :]
+    w1 = 0.5 * (1 + np.cos(np.pi * (-1 + 2.0 * n1 / alpha / (n_samples - 1))))
+    w2 = np.ones(n_samples - n1.size - n3.size)
+    w3 = 0.5 * (1 + np.cos(np.pi * (-2.0 / alpha + 1 + 2.0 * n3 / alpha / (n_samples - 1))))
+    return np.concatenate((w1, w2, w3))
 
 
 def amplitude_spectrum(

@@ -308,10 +308,10 @@ def check_settings(bf: BenchFile, inst: BenchInstruments) -> list[Finding]:
 def phase_slope_Hz(x: NDArray[np.float64], rate_Hz: float) -> float:
     """The mean frequency (Hz) of a narrowband signal ``x``: the slope of its analytic
     signal's phase where the envelope is above half its peak (weighted by the envelope)."""
-    from scipy.signal import hilbert
+    from analysis.envelope import analytic_signal
 
     x = np.asarray(x, dtype=np.float64)
-    z = hilbert(x - float(np.median(x)))
+    z = analytic_signal(x - float(np.median(x)))
     env = np.abs(z)
     keep = env >= 0.5 * float(np.max(env))
     if np.count_nonzero(keep) < 3:
