@@ -13,7 +13,8 @@ units a bench file or protocol uses with their prefixes, a few others a lab type
 inch, min, h, deg), ``Vpp``/``Vpk`` (peak-to-peak and peak volts: ``1 Vpk = 2 Vpp``) and the
 sample (``S``, ``Sa``: ``1 MS/s``). Compound units (``um/V``, ``mm/s/V``, ``N/V``,
 ``kg/m^3``) are pint's products of these. Built on first use (a few ms after ``import pint``,
-about 0.1 s), never at import.
+0.15-0.23 s), never at import, and only for a unit this machine has not read before: pint's
+answers are remembered in the user cache folder (:mod:`instruments.unit_memo`).
 
 The pydantic annotated types at the bottom (``Frequency``, ``Length``, ...) make a model field
 accept only such strings and store the float, so a schema reads ``f_center: Frequency``.
@@ -21,14 +22,19 @@ accept only such strings and store the float, so a schema reads ``f_center: Freq
 
 from __future__ import annotations
 
+import importlib.util
 import math
+import os
 import re
 import threading
 from dataclasses import dataclass
 from functools import lru_cache
+from pathlib import Path
 from typing import Annotated, Any
 
 from pydantic import BeforeValidator, PlainSerializer
+
+from instruments.unit_memo import UnitMemo
 
 __all__ = [
     "DEFINITIONS",
@@ -181,9 +187,35 @@ def _unit_text(unit: str) -> str | None:
     return text
 
 
+@lru_cache(maxsize=1)
+def _memo() -> UnitMemo:
+    """The answers pint gave on this machine (:mod:`instruments.unit_memo`), keyed by this
+    module's source and the installed pint (found, not imported)."""
+    from instruments.user_cache import cache_dir
+
+    spec = importlib.util.find_spec("pint")
+    origin = spec.origin if spec is not None and spec.origin else ""
+    stat = os.stat(origin) if origin else None
+    pint_id = f"{origin} {stat.st_size} {stat.st_mtime_ns}" if stat is not None else "no pint"
+    return UnitMemo(cache_dir(), [Path(__file__).read_bytes(), pint_id])
+
+
 @lru_cache(maxsize=512)
 def _factor(unit: str, dimension: str) -> tuple[float | None, str]:
-    """(factor from ``unit`` to the dimension's unit, or ``None``; what ``unit`` is)."""
+    """(factor from ``unit`` to the dimension's unit, or ``None``; what ``unit`` is): as pint
+    answered on this machine before (:func:`_memo`), else :func:`_pint_factor`."""
+    if "\0" in unit:  # the memo's separator; never a unit anyway
+        return _pint_factor(unit, dimension)
+    memo = _memo()
+    answer = memo.recall(unit, dimension)
+    if answer is None:
+        answer = _pint_factor(unit, dimension)
+        memo.remember(unit, dimension, answer)
+    return answer
+
+
+def _pint_factor(unit: str, dimension: str) -> tuple[float | None, str]:
+    """:func:`_factor`, by pint."""
     ureg = registry()
     import pint  # imported by registry()
 

@@ -6,7 +6,7 @@ construction (:mod:`.alpha`), drives (:mod:`.drive`) and the compiled integrator
 (:mod:`.kernel`, :mod:`.simulation`). SI units throughout.
 
 The names below are imported on first use (PEP 562), so that importing a light submodule
-(``sim_backend.dem.kernel_cache``, ``.user_cache``) does not load scipy and numba.
+(``sim_backend.dem.kernel_cache``, ``.verdict_store``) does not load scipy and numba.
 """
 
 from __future__ import annotations

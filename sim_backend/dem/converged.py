@@ -5,7 +5,7 @@ The reference is the 6th-order composition ``yoshida6`` run at ``dt0``, ``dt0/2`
 relative L2 change of the worst cylinder's velocity between two halvings falls below
 ``tolerance_rel`` (or the step reaches ``min_dt_s``: then ``converged`` is False and the change
 reached is reported). The finest run is the reference. It is stored as ``<digest>.npz`` in
-:func:`~sim_backend.dem.user_cache.cache_dir` (never inside the repository), keyed by the
+:func:`~instruments.user_cache.cache_dir` (never inside the repository), keyed by the
 scene (chain YAML, drive, window, rate) and the reference method (integrator, dt0, tolerance,
 min step).
 """
@@ -20,11 +20,11 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from instruments.user_cache import cache_dir
 from sim_backend.dem.accuracy_scenes import AccuracyScene
 from sim_backend.dem.beam import MODES_VERSION
 from sim_backend.dem.errors import rel_l2
 from sim_backend.dem.kernel import NUMERICS_VERSION
-from sim_backend.dem.user_cache import cache_dir
 
 __all__ = ["ConvergedReference", "cache_dir", "converged_reference"]
 

@@ -3,7 +3,7 @@
 numba compiles the kernel (:mod:`sim_backend.dem.kernel`) on first use, 6-10 s, and keeps the
 machine code on disk. By default numba writes it next to the sources (inside the checkout of an
 editable install, in a possibly read-only site-packages otherwise); here it goes to the user's
-cache folder, ``<cache_dir>/numba`` (:func:`sim_backend.dem.user_cache.cache_dir`: platformdirs'
+cache folder, ``<cache_dir>/numba`` (:func:`instruments.user_cache.cache_dir`: platformdirs'
 user cache folder of biafc-lab, or ``$BIAFC_CACHE_DIR``), for the project's own files only.
 ``$NUMBA_CACHE_DIR`` or ``$NUMBA_CACHE_LOCATOR_CLASSES``, when set, win; a cache folder that
 cannot be written falls back to numba's own choice.
@@ -47,7 +47,7 @@ _ANNOUNCED = False
 
 def kernel_cache_dir() -> Path:
     """The folder of the compiled kernel: ``<cache_dir>/numba``."""
-    from sim_backend.dem.user_cache import cache_dir
+    from instruments.user_cache import cache_dir
 
     return cache_dir() / "numba"
 

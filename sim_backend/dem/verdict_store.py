@@ -35,8 +35,8 @@ _PENDING: dict[Path, dict[str, list[Any]]] = {}  # cache file -> key -> entry
 
 
 def path() -> Path:
-    """The cache file in the user's cache folder (:func:`sim_backend.dem.user_cache.cache_dir`)."""
-    from sim_backend.dem.user_cache import cache_dir
+    """The cache file in the user's cache folder (:func:`instruments.user_cache.cache_dir`)."""
+    from instruments.user_cache import cache_dir
 
     return cache_dir() / "step-stability.json"
 

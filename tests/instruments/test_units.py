@@ -4,6 +4,7 @@ field, what was given and what is expected, through a protocol file and the comm
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 import time
@@ -138,16 +139,21 @@ def test_bench_quantities_per_volt_and_in_other_spellings() -> None:
         parse_bench(text.replace("piezo_stroke: 0.05 um/V", "piezo_stroke: 0.05 um"))
 
 
-def test_the_registry_is_built_on_first_use_not_at_import() -> None:
+def _cold(tmp_path: Path) -> dict[str, str]:
+    """An environment whose user cache folder is empty: no unit remembered, pint answers."""
+    return dict(os.environ, BIAFC_CACHE_DIR=str(tmp_path))
+
+
+def test_the_registry_is_built_on_first_use_not_at_import(tmp_path: Path) -> None:
     code = (
         "import sys, protocols.schema, protocols.bench; assert 'pint' not in sys.modules; "
         "from instruments.units import parse_quantity; parse_quantity('1 um', 'length'); "
         "assert 'pint' in sys.modules"
     )
-    subprocess.run([sys.executable, "-c", code], check=True, cwd=ROOT)
+    subprocess.run([sys.executable, "-c", code], check=True, cwd=ROOT, env=_cold(tmp_path))
 
 
-def test_pint_is_read_without_dask() -> None:
+def test_pint_is_read_without_dask(tmp_path: Path) -> None:
     """pint imports dask when it is installed (array support not used here): 0.1 s more at the
     first quantity and a larger heap for every later garbage collection; dask stays importable."""
     code = (
@@ -155,4 +161,4 @@ def test_pint_is_read_without_dask() -> None:
         "'length'); assert 'pint' in sys.modules and 'dask' not in sys.modules, 'dask loaded'; "
         "import importlib.util; assert importlib.util.find_spec('dask') is not None"
     )
-    subprocess.run([sys.executable, "-c", code], check=True, cwd=ROOT)
+    subprocess.run([sys.executable, "-c", code], check=True, cwd=ROOT, env=_cold(tmp_path))

@@ -1,4 +1,6 @@
-"""The user cache folder of biafc-lab: compiled kernel, converged references, stability verdicts.
+"""The user cache folder of biafc-lab: compiled kernel, converged references, stability verdicts,
+parsed units. In the lowest layer (``instruments``), so that every layer can keep what it
+computed once there.
 
 ``$BIAFC_CACHE_DIR`` when set, else platformdirs' user cache folder (``$XDG_CACHE_HOME/biafc-lab``
 or ``~/.cache/biafc-lab`` on Linux, ``~/Library/Caches/biafc-lab`` on macOS,
