@@ -23,7 +23,6 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 from scipy.linalg import eig, solve
-from scipy.signal import lfilter
 
 from sim_backend.dem.chain import Chain
 from sim_backend.dem.drive import Drive
@@ -144,7 +143,11 @@ def _unit_response(
     unit = Drive(drive.direction, drive.kind, 1.0, drive.burst, drive.waveform, drive.delay_s)
     a_fine = unit.value(t_fine)
     e, w0, w1 = _foh_weights(lam, h)
-    # xi on the fine grid, one first-order recursion per mode (xi(0) = 0: the chain at rest)
+    # xi on the fine grid, one first-order recursion per mode (xi(0) = 0: the chain at rest);
+    # scipy.signal here, not at import: it took 0.7-0.8 s, which the window paid as it opened
+    # (it imports this module with the model overlay) and never used
+    from scipy.signal import lfilter
+
     xi_fine = np.empty((lam.size, n_fine), dtype=np.complex128)
     for k in range(lam.size):
         xi_fine[k] = gin[k] * lfilter([w1[k], w0[k]], [1.0, -e[k]], a_fine)

@@ -52,13 +52,15 @@ def test_an_empty_record_is_refused() -> None:
         analytic_signal(np.zeros(0))
 
 
-def test_the_figure_commands_modules_import_no_scipy_signal() -> None:
+def test_the_figure_commands_and_the_windows_modules_import_no_scipy_signal() -> None:
     """``biafc figures``' modules (the report, the spectra, the envelopes, the bench's preflight
-    checks) in a fresh process: no ``scipy.signal`` (it was imported by the spectra's window
-    and the envelopes' Hilbert transform; this test failed then)."""
+    checks) and the bench window's (with the model overlay, which brings the linear response)
+    in a fresh process: no ``scipy.signal`` (it was imported by the spectra's window, the
+    envelopes' Hilbert transform and the linear response's module; this test failed then)."""
     code = (
         "import sys\n"
         "import analysis.report, analysis.spectra, analysis.envelope, daq.preflight\n"
+        "import analysis.model_overlay, daq.gui.main_window\n"
         "print(sorted(m for m in sys.modules if m.startswith('scipy.signal')))\n"
     )
     out = subprocess.run(
