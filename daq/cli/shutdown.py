@@ -3,9 +3,9 @@ of a second.
 
 When a command has finished, CPython's shutdown runs its garbage collector over every object
 still alive: numba's type registries, pint's unit registry, scipy and h5py hold a few hundred
-thousand of them, and walking them took 0.25-0.4 s after every ``run_protocol`` and ``biafc``
-command on the 2-core host (docs/performance.md, section 1), a fifth of a warm
-``run_protocol smoke.yaml``. :func:`settle` collects the garbage there is now (so every
+thousand of them, and walking them took 0.25-0.4 s after a warm ``run_protocol smoke.yaml`` on
+the 2-core host, about 15 % of the command (docs/performance.md, section 3). :func:`settle`
+collects the garbage there is now (so every
 finaliser still runs, while everything it may need exists), then freezes the survivors
 (:func:`gc.freeze`): shutdown's collections skip them, and they are still released one by one
 as the modules are cleared. Nothing else changes: ``atexit`` handlers (the log's flush, the
