@@ -4,15 +4,13 @@ and a figure command's modules no longer import it."""
 
 from __future__ import annotations
 
-import subprocess
-import sys
-
 import numpy as np
 import pytest
 from scipy.signal import hilbert, windows
 
 from analysis.envelope import analytic_signal
 from analysis.spectra import TUKEY_ALPHA, tukey, window_for
+from tests.fresh_process import python_c
 
 
 @pytest.mark.parametrize("n", [0, 1, 2, 3, 4, 10, 101, 1000, 13000])
@@ -63,7 +61,6 @@ def test_the_figure_commands_and_the_windows_modules_import_no_scipy_signal() ->
         "import analysis.model_overlay, daq.gui.main_window\n"
         "print(sorted(m for m in sys.modules if m.startswith('scipy.signal')))\n"
     )
-    out = subprocess.run(
-        [sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=120
-    )
+    out = python_c(code)
+    assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "[]", out.stdout

@@ -6,12 +6,12 @@ collections, which walked numba's, pint's and scipy's objects for 0.25-0.4 s aft
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 import tomllib
 from pathlib import Path
 
 import pytest
+
+from tests.fresh_process import python_c
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -59,10 +59,7 @@ def test_a_console_script_settles_the_collector_and_runs_every_finaliser(
     that ``main`` left in a reference cycle was finalised before the process ended."""
     module, name = _scripts()[script].split(":")
     marker = tmp_path / "finalised.txt"
-    out = subprocess.run(
-        [sys.executable, "-c", _CHILD, module, name, MAINS[script], str(marker)],
-        capture_output=True, text=True, cwd=tmp_path, timeout=120,
-    )  # fmt: skip
+    out = python_c(_CHILD, module, name, MAINS[script], str(marker), cwd=tmp_path)
     assert out.returncode == 0, out.stderr
     result = json.loads(out.stdout.strip().splitlines()[-1])
     assert result["code"] == 0
@@ -82,9 +79,7 @@ def test_python_dash_m_daq_settles_too(tmp_path: Path) -> None:
         "except SystemExit as exc:\n"
         "    print(exc.code, gc.get_freeze_count())\n"
     )
-    out = subprocess.run(
-        [sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path, timeout=120
-    )
+    out = python_c(code, cwd=tmp_path)
     assert out.returncode == 0, out.stderr
     status, frozen = out.stdout.split()
     assert status == "0" and int(frozen) > 1000

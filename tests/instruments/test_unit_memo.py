@@ -7,14 +7,13 @@ from __future__ import annotations
 
 import json
 import os
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
 from instruments import units
 from instruments.unit_memo import MAX_ENTRIES, UnitMemo
+from tests.fresh_process import python_c
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -96,10 +95,7 @@ def test_a_second_process_reads_the_shipped_files_without_pint(tmp_path: Path) -
     env = dict(os.environ, BIAFC_CACHE_DIR=str(tmp_path))
     runs = []
     for _ in range(2):
-        out = subprocess.run(
-            [sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, env=env,
-            timeout=120,
-        )  # fmt: skip
+        out = python_c(code, cwd=ROOT, env=env)
         assert out.returncode == 0, out.stderr
         runs.append(json.loads(out.stdout.strip().splitlines()[-1]))
     (pint_first, values_first), (pint_second, values_second) = runs
