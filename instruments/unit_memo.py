@@ -9,24 +9,24 @@ pint's answer (the factor to the dimension's unit, or why there is none) is then
 stays the one place the units are defined: the memo holds nothing pint has not said.
 
 One JSON file in the user cache folder (:func:`instruments.user_cache.cache_dir`),
-``units-<key>.json``, ``{"<unit>\\u0000<dimension>": [factor or null, what]}``. The key hashes
-what an answer depends on, given by the caller: the units module's own source (its definitions,
-dimensions and reading rules) and the installed pint (its file's path, size and time), so an
-edit or an upgrade starts a new file. A missing, unreadable or damaged file is an empty memo;
-the file is replaced whole (a reader never sees half of one), and a cache folder that cannot
-be written only costs the speed-up. Floats are kept as JSON writes them (``repr``: exact).
+``units-<key>.json``, ``{"<unit>\\u0000<dimension>": [factor or null, what]}``, read and merged
+as the stability verdicts' file is (:mod:`instruments.cache_entries`: a damaged file is an empty
+memo, a file is replaced whole, a cache folder that cannot be written only costs the speed-up).
+The key hashes what an answer depends on, given by the caller: the units module's own source
+(its definitions, dimensions and reading rules) and the installed pint (its file's path, size
+and time), so an edit or an upgrade starts a new file. Floats are kept as JSON writes them
+(``repr``: exact).
 """
 
 from __future__ import annotations
 
-import contextlib
 import hashlib
-import json
 import math
-import os
 import threading
 from collections.abc import Iterable
 from pathlib import Path
+
+from instruments.cache_entries import merge_entries, read_entries
 
 __all__ = ["MAX_ENTRIES", "UnitMemo"]
 
@@ -56,15 +56,10 @@ class UnitMemo:
     def _load(self) -> dict[str, Answer]:
         if self._answers is None:
             self._answers = {}
-            try:
-                stored = json.loads(self.path.read_text(encoding="utf-8"))
-            except (OSError, ValueError):
-                stored = None
-            if isinstance(stored, dict):
-                for entry, value in stored.items():
-                    answer = _answer(value)
-                    if answer is not None:
-                        self._answers[entry] = answer
+            for entry, value in read_entries(self.path).items():
+                answer = _answer(value)
+                if answer is not None:
+                    self._answers[entry] = answer
         return self._answers
 
     def recall(self, unit: str, dimension: str) -> Answer | None:
@@ -73,22 +68,14 @@ class UnitMemo:
             return self._load().get(self._entry(unit, dimension))
 
     def remember(self, unit: str, dimension: str, answer: Answer) -> None:
-        """Keep ``answer`` (pint's) and write the file again (only a miss gets here)."""
+        """Keep ``answer`` (pint's) and merge it into the file (only a miss gets here)."""
         with self._lock:
             answers = self._load()
             entry = self._entry(unit, dimension)
             if answers.get(entry) == answer or len(answers) >= MAX_ENTRIES:
                 return
             answers[entry] = answer
-            text = json.dumps({k: list(v) for k, v in answers.items()}, ensure_ascii=False)
-            tmp = self.path.with_name(f"{self.path.name}.{os.getpid()}.tmp")
-            try:
-                self.path.parent.mkdir(parents=True, exist_ok=True)
-                tmp.write_text(text, encoding="utf-8")
-                os.replace(tmp, self.path)
-            except OSError:  # a read-only cache folder: no memo, the same answers from pint
-                with contextlib.suppress(OSError):
-                    tmp.unlink(missing_ok=True)
+            merge_entries(self.path, {entry: list(answer)}, MAX_ENTRIES)
 
 
 def _answer(value: object) -> Answer | None:

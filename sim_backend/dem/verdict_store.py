@@ -9,19 +9,19 @@ read or written is no error, only a verdict computed again.
 costs 0.2-0.4 ms, a tenth of a first check, and a background thread for it contended for the GIL
 with the check itself. :func:`load` sees this process's pending verdicts as well as the file's. A
 process killed before it ends loses its new verdicts, which the next process computes again (a
-cache, not a record). Two processes may write at once: each writes its own temporary file and
-replaces the cache file with it (``os.replace``, atomic), so the file is always whole; one of two
-simultaneous sets of new entries can be lost, and is computed again next time.
+cache, not a record). The file is read and merged by :mod:`instruments.cache_entries` (whole
+files only; of two processes writing at once, one's new entries can be lost and are computed
+again next time).
 """
 
 from __future__ import annotations
 
 import atexit
-import json
-import os
 import threading
 from pathlib import Path
 from typing import Any
+
+from instruments.cache_entries import merge_entries, read_entries
 
 __all__ = ["flush", "load", "path", "store"]
 
@@ -41,14 +41,6 @@ def path() -> Path:
     return cache_dir() / "step-stability.json"
 
 
-def _read(file: Path) -> dict[str, Any]:
-    try:
-        data = json.loads(file.read_text())
-    except (OSError, ValueError):
-        return {}
-    return data if isinstance(data, dict) else {}
-
-
 def load(key: str) -> list[Any] | None:
     """The entry stored under ``key`` (this process's pending one first, else the file's), or
     None (none, or the file unreadable)."""
@@ -56,22 +48,8 @@ def load(key: str) -> list[Any] | None:
     with _LOCK:
         entry = _PENDING.get(file, {}).get(key)
     if entry is None:
-        entry = _read(file).get(key)
+        entry = read_entries(file).get(key)
     return entry if isinstance(entry, list) else None
-
-
-def _merge(file: Path, batch: dict[str, list[Any]]) -> None:
-    try:
-        data = _read(file)
-        if len(data) + len(batch) > MAX_ENTRIES:
-            data = {}
-        data.update(batch)
-        file.parent.mkdir(parents=True, exist_ok=True)
-        tmp = file.with_suffix(f".{os.getpid()}.{threading.get_ident()}.tmp")
-        tmp.write_text(json.dumps(data))
-        os.replace(tmp, file)
-    except OSError:
-        pass
 
 
 def store(key: str, entry: list[Any]) -> None:
@@ -92,7 +70,7 @@ def flush() -> None:
         batches = dict(_PENDING)
         _PENDING.clear()
         for file, batch in batches.items():
-            _merge(file, batch)
+            merge_entries(file, batch, MAX_ENTRIES)
 
 
 atexit.register(flush)

@@ -39,6 +39,19 @@ def test_the_memo_gives_back_pints_answers_exactly(tmp_path: Path) -> None:
     assert any(a[0] is None for a in answers.values()) and any(a[0] for a in answers.values())
 
 
+def test_two_processes_remembering_in_turn_keep_both_answers(tmp_path: Path) -> None:
+    """Each memo read the file before the other wrote; each write merges into the file as it is
+    now (``instruments.cache_entries``), so neither answer is lost (the memo wrote its own view
+    over the file before, and the first answer was gone)."""
+    first, second = UnitMemo(tmp_path, ["key"]), UnitMemo(tmp_path, ["key"])
+    assert first.recall("nm", "length") is None and second.recall("kHz", "frequency") is None
+    first.remember("nm", "length", (1e-9, ""))
+    second.remember("kHz", "frequency", (1000.0, ""))
+    again = UnitMemo(tmp_path, ["key"])
+    assert again.recall("nm", "length") == (1e-9, "")
+    assert again.recall("kHz", "frequency") == (1000.0, "")
+
+
 def test_another_key_is_another_memo(tmp_path: Path) -> None:
     UnitMemo(tmp_path, ["units.py v1", "pint a"]).remember("nm", "length", (1e-9, ""))
     assert UnitMemo(tmp_path, ["units.py v2", "pint a"]).recall("nm", "length") is None
