@@ -41,10 +41,6 @@ def cell_apparent_mass_kg(chain: Chain, i: int, omega_rad_s: float) -> float:
     return float(chain.m0_kg[i] + np.sum(chain.m_res_kg[i] * wj2 / (wj2 - omega_rad_s**2)))
 
 
-def _cell_mass(chain: Chain, i: int, w: float) -> float:
-    return cell_apparent_mass_kg(chain, i, w)
-
-
 def _beam_mass(length_m: float, chain: Chain, theory: str, w: float) -> float:
     return apparent_mass_kg(w, length_m, chain.diameter_m, chain.material, theory)
 
@@ -81,9 +77,10 @@ def quasi_bands(chain: Chain, n_bands: int = 3) -> Bands:
     spring ``m_j w_j^2``), so its edges are eigenfrequencies: the onsets (``M(w) = 0``) those of
     the free block, the cutoffs (``w^2 M(w) = 4K``) those of the block with its primary held by a
     spring ``4K``, one of each between consecutive poles. All cylinders in two batched symmetric
-    eigenvalue calls (numpy), no root search: the root search (:func:`_edges`, scipy's brentq)
-    imported scipy.optimize, 0.3 s of every ``run_protocol`` on the simulated bench, and agrees
-    to 1e-10 (``tests/dem/test_bands.py``).
+    eigenvalue calls (numpy), no root search: the root search of the apparent mass (:func:`_edges`
+    with scipy's brentq, which ``continuum_bands`` still uses) imported scipy.optimize, 0.3 s of
+    every ``run_protocol`` on the simulated bench; ``tests/dem/test_bands.py`` keeps it as the
+    reference, which these edges equal to 1e-12.
     """
     if not 1 <= n_bands <= chain.n_modes + 1:
         raise ValueError(f"n_bands must be in 1..{chain.n_modes + 1} for J = {chain.n_modes}")
@@ -96,21 +93,6 @@ def quasi_bands(chain: Chain, n_bands: int = 3) -> Bands:
     onset = free[:, :n_bands].copy()
     onset[:, 0] = 0.0
     return Bands(onset / (2.0 * math.pi), held[:, :n_bands] / (2.0 * math.pi))
-
-
-def _quasi_bands_by_root_search(chain: Chain, n_bands: int = 3) -> Bands:
-    """:func:`quasi_bands` by a root search of the cell's apparent mass (its previous method,
-    kept as the test's reference)."""
-    onset = np.empty((chain.n, n_bands))
-    cutoff = np.empty((chain.n, n_bands))
-    for i in range(chain.n):
-        onset[i], cutoff[i] = _edges(
-            partial(_cell_mass, chain, i),
-            chain.omega_res_rad_s[i],
-            4.0 * chain.K_lin,
-            n_bands,
-        )
-    return Bands(onset, cutoff)
 
 
 def continuum_bands(chain: Chain, n_bands: int = 3) -> Bands:

@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import math
+from functools import partial
 
 import numpy as np
 import pytest
 
 from sim_backend import dem
+from sim_backend.dem import bands
 from sim_backend.dem.spec import ChainSpec, MaterialSpec
 
 
@@ -128,18 +130,31 @@ def test_oblique_crossing_matches_the_elliptical_hertz_approximation(degrees: fl
     assert dem.build_chain(spec).beta_c == pytest.approx(beta)
 
 
+def _quasi_bands_by_root_search(chain: dem.Chain, n_bands: int) -> bands.Bands:
+    """The cell's edges by a root search of its apparent mass (``quasi_bands``' previous method,
+    the continuum check's ``_edges`` on the DEM cell), the reference of the eigenvalue edges."""
+    onset = np.empty((chain.n, n_bands))
+    cutoff = np.empty((chain.n, n_bands))
+    for i in range(chain.n):
+        onset[i], cutoff[i] = bands._edges(
+            partial(bands.cell_apparent_mass_kg, chain, i),
+            chain.omega_res_rad_s[i],
+            4.0 * chain.K_lin,
+            n_bands,
+        )
+    return bands.Bands(onset, cutoff)
+
+
 @pytest.mark.parametrize(
     "update", [{}, {"n_modes": 6}, {"preload": 0.5}, {"n_cylinders": 5, "n_modes": 1}]
 )
 def test_cell_edges_by_eigenvalues_equal_the_root_search(update: dict[str, object]) -> None:
     """The cell's edges as eigenfrequencies of its block (free, and held by 4K) are the roots of
     its apparent mass that the previous root search found, for every band count."""
-    from sim_backend.dem import bands
-
     chain = dem.build_chain(dem.default_chain_spec().model_copy(update=update))
     for n_bands in range(1, chain.n_modes + 2):
         got = dem.quasi_bands(chain, n_bands)
-        ref = bands._quasi_bands_by_root_search(chain, n_bands)
+        ref = _quasi_bands_by_root_search(chain, n_bands)
         scale = ref.cutoff_Hz.max()
         assert np.abs(got.onset_Hz - ref.onset_Hz).max() <= 1e-12 * scale
         assert np.abs(got.cutoff_Hz - ref.cutoff_Hz).max() <= 1e-12 * scale
