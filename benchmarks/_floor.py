@@ -58,32 +58,40 @@ def kernel_ops(
     - ``pass1``, after every drift (m per step and one per sample): per cylinder the kick length
       x force (1 other); per mode the pending kick (1 fma), the 2x2 drift (2 fma, 2 other) and
       the mode's share of u and u' (2 fma).
-    - ``pass2``, every kick. The actuator (lane masks, drive force, the Hertz force with its
-      overlap, the wall's work, the force at the start velocities): 21 other, 1 sqrt. Between
-      cylinders: the overlap (2), the Hertz force (2 multiplies and a max, 1 sqrt), the force at
-      the start velocities (5); at a far wall: overlap 1, Hertz 3 and 1 sqrt, force 4 (a free
-      end: nothing). No dashpot: the force on each cylinder (1 each). Dashpot: per cylinder the
-      stage velocity (3), per contact the force at the stage velocities (actuator 7, between
-      cylinders 5, far wall 4), per cylinder the force on it (midpoint, 1) or its second stage
-      velocity (Heun, 3).
-    - ``pass3``, every kick with Heun kicks: the actuator 12 (drive force 2, force 7,
-      ``(k1 + 3 k3) / 4`` 3), per contact between cylinders the force (5), the average (3) and
-      the force on the cylinder (1); the far end 8 (a free end 4).
+    - ``pass2``, every kick. A contact's force at a velocity, ``[fh (1 + chi d')]_+``, is one
+      multiply-add and 2 other (the factor, the product, the max). The actuator (lane masks,
+      drive force, the Hertz force with its overlap, the wall's work, the force at the start
+      velocities): 19 other, 1 fma, 1 sqrt. Between cylinders: the overlap (1: the
+      displacements are summed from shifts that hold the rest overlaps), the Hertz force (2
+      multiplies and a max, 1 sqrt); at a far wall: overlap 1, Hertz 3 and 1 sqrt, force at the
+      start velocities 2 and 1 fma (a free end: nothing). No dashpot: a contact's force is its
+      Hertz force; the force on each cylinder (1 each). Dashpot: between cylinders the force at
+      the start velocities (relative velocity 1, force 2 and 1 fma), per cylinder the stage
+      velocity (1 and 1 fma), per contact the force at the stage velocities (actuator 5 and 1
+      fma, between cylinders 3 and 1 fma, far wall 2 and 1 fma), per cylinder the force on it
+      (midpoint, 1) or its second stage velocity (Heun, 1 and 1 fma).
+    - ``pass3``, every kick with Heun kicks: the actuator 10 and 1 fma (drive force 2, force 5
+      and 1 fma, ``(k1 + 3 k3) / 4`` 3), per contact between cylinders the force (3 and 1 fma),
+      the average (3) and the force on the cylinder (1); the far end 6 and 1 fma (a free end 4).
     - ``record``, every sample: per recorded cylinder the velocity ``sum_k phi_k p_k`` (K fma).
     """
     N, K = n_cyl, n_block
     w = 1 if far_wall else 0
     drifts = n_kicks + 1.0 / n_sub
     out = {"pass1": {"fma": 5 * N * K * drifts, "other": (2 * N * K + N) * drifts, "sqrt": 0.0}}
-    other = 21 + 10 * (N - 1) + 8 * w
+    other = 19 + 4 * (N - 1) + 6 * w
+    fma = 1 + w
     if not dashpot:
         other += N
     else:
-        other += 3 * N + (7 + 5 * (N - 1) + 4 * w) + (3 if heun_kicks else 1) * N
-    out["pass2"] = {"fma": 0.0, "other": float(other * n_kicks), "sqrt": float((N + w) * n_kicks)}
+        other += 3 * (N - 1) + N + (5 + 3 * (N - 1) + 2 * w) + N
+        fma += (N - 1) + N + (1 + (N - 1) + w) + (N if heun_kicks else 0)
+    out["pass2"] = {"fma": float(fma * n_kicks), "other": float(other * n_kicks),
+                    "sqrt": float((N + w) * n_kicks)}  # fmt: skip
     if dashpot and heun_kicks:
-        pass3 = 12 + 9 * (N - 1) + 4 * w + 4
-        out["pass3"] = {"fma": 0.0, "other": float(pass3 * n_kicks), "sqrt": 0.0}
+        pass3 = 10 + 7 * (N - 1) + 2 * w + 4
+        out["pass3"] = {"fma": float((N + w) * n_kicks), "other": float(pass3 * n_kicks),
+                        "sqrt": 0.0}  # fmt: skip
     out["record"] = {"fma": K * n_recorded / n_sub, "other": 0.0, "sqrt": 0.0}
     return out
 

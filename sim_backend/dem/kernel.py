@@ -72,7 +72,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sim_backend.dem.kernel_cache import install_cache_locator
-from sim_backend.dem.simd import Vec4, vfma, vload, vmax, vsplat, vsqrt, vstore
+from sim_backend.dem.simd import Vec4, vbcast, vfma, vload, vmax, vsplat, vsqrt, vstore
 from sim_backend.dem.split_steps import (
     find_breakpoints,
     keep_lanes,
@@ -97,7 +97,7 @@ __all__ = [
 
 #: changes whenever the kernel's arithmetic changes its results beyond rounding; cached converged
 #: references (``sim_backend.dem.converged``) are keyed by it
-NUMERICS_VERSION = "3: steps split at the burst ends"
+NUMERICS_VERSION = "4: overlaps from shifted displacements, fused dashpot and stage"
 
 
 def drift_coefficients(
@@ -354,9 +354,22 @@ def _hertz(d: Vec4, beta: float) -> Vec4:
 
 
 @numba.njit(inline="always")
-def _dashpot(fh: Vec4, chi: float, rel_vel: Vec4) -> Vec4:
-    """Hunt-Crossley contact force ``[fh (1 + chi d')]_+`` (N); ``rel_vel`` = d' (m/s)."""
-    return vmax(fh * (1.0 + chi * rel_vel), vsplat(0.0))
+def _dashpot(fh: Vec4, chi: Vec4, rel_vel: Vec4) -> Vec4:
+    """Hunt-Crossley contact force ``[fh (1 + chi d')]_+`` (N); ``rel_vel`` = d' (m/s). The
+    factor is one fused multiply-add: a shorter chain of dependent operations per contact."""
+    return vmax(fh * vfma(chi, rel_vel, vsplat(1.0)), vsplat(0.0))
+
+
+@numba.njit(inline="always")
+def _stage(
+    v: Vec4, f_left: Vec4, f_right: Vec4, va_left: Vec4, fh_left: Vec4, chi_left: Vec4, c: Vec4
+) -> tuple[Vec4, Vec4]:
+    """A damped kick's first stage at a cylinder of start velocity ``v`` (m/s) between contacts
+    with forces ``f_left``, ``f_right`` (N): its stage velocity ``va = v + c (f_left - f_right)``
+    (``c`` = stage length / primary mass, s/kg), and the left contact's force at the stage
+    velocities, ``va_left`` of its left cylinder (Hertz force ``fh_left``, factor ``chi_left``)."""
+    va = vfma(c, f_left - f_right, v)
+    return va, _dashpot(fh_left, chi_left, va_left - va)
 
 
 @numba.njit(inline="always")
@@ -366,7 +379,7 @@ def _actuator_force(
     """Force (N) of the actuator contact on the first cylinder, velocity ``v`` (m/s): the moving
     wall's Hertz force ``fh`` with its dashpot (``wall`` = 1 on those lanes, else 0 and ``fh`` = 0),
     plus ``drive_force`` (the preload and drive on force-driven lanes, else 0)."""
-    return _dashpot(fh, chi, wall * (drive_vel - v)) + drive_force
+    return _dashpot(fh, vsplat(chi), wall * (drive_vel - v)) + drive_force
 
 
 @numba.njit(inline="always")
@@ -374,7 +387,7 @@ def _far_end_force(fh: Vec4, chi: float, v: Vec4, far_wall: int, f0: float) -> V
     """Force (N) of the far-end contact on the last cylinder, velocity ``v`` (m/s): a wall at rest
     (Hertz force ``fh`` with its dashpot) or, on a free end, the preload ``f0``."""
     if far_wall == 1:
-        return _dashpot(fh, chi, v)
+        return _dashpot(fh, vsplat(chi), v)
     return vsplat(f0)
 
 
@@ -489,6 +502,14 @@ def run_chunks(
         rec = rec_idx[o]
         x0 = chi[o]
         im0 = inv_m0[o]
+        # pass 1 sums each primary displacement from shift[i] (m), so that contact j's overlap
+        # d0[j] + u[j-1] - u[j] is one subtraction in pass 2: shift[j] = shift[j-1] - d0[j]
+        shift = np.zeros(N)
+        for i in range(1, N):
+            shift[i] = shift[i - 1] - d0[i]
+        far_rest = d0[N] - shift[N - 1]  # the far end's overlap is far_rest + u[N-1] shifted
+        cs1 = np.zeros(N)  # per kick: first stage velocity step per force (m/s/N), hk/m0 x c
+        cs2 = np.zeros(N)  # and Heun's second, hk/m0 x 2/3
         # steps split at the drives' breakpoints: the samples that hold one, per lane
         bp_n = np.zeros(W, dtype=np.int64)
         bp_smp = np.zeros((W, 2), dtype=np.int64)
@@ -615,9 +636,9 @@ def run_chunks(
                         ja = i * W + g
                         fa = hk_prev * vload(force, ja)
                         fb = hk_prev * vload(force, ja + 4) if pairs else fa
-                        ua = vsplat(0.0)
+                        ua = vsplat(shift[i])
                         va = vsplat(0.0)
-                        ub = vsplat(0.0)
+                        ub = ua
                         vb = vsplat(0.0)
                         for k in range(K):
                             c0 = vsplat(co[dk, i, k, 0])
@@ -638,6 +659,10 @@ def run_chunks(
                 hk_prev = hk
                 if (kflag[kk] & 2) != 0:
                     continue
+                if damped:
+                    for i in range(N):
+                        cs1[i] = hk * im0[i] * first_stage
+                        cs2[i] = hk * im0[i] * (2.0 / 3.0)
                 # ---- the drives at t (in a split step: on the sub-step's side of its breakpoints)
                 side = kside[kk]
                 for b in range(W):
@@ -657,6 +682,12 @@ def run_chunks(
                 # k2 acts on the cylinders) or 1/3 (Heun's third-order rule: two contacts behind,
                 # the second stage vb = v + (2h/3) k2 / m0 into vs, with fh and k1 kept for
                 # pass 3, which gives the forces k3 at vb and the kick's (k1 + 3 k3) / 4).
+                # Each case has a loop over the contacts between cylinders of its own, without a
+                # branch inside (first contact and far end before and after it): 25 instructions
+                # a contact against 58 with the cases as branches in one loop, 10-12 cycles a
+                # 4-lane vector against 17-20 (docs/performance.md, section 3, "Pass 2 without
+                # branches"). Its coefficients by vbcast: no negative-index check per read.
+                zero = vsplat(0.0)
                 for g in range(0, W, 4):
                     wl = vload(wall, g)
                     fd = vload(fdrv, g)
@@ -671,51 +702,80 @@ def run_chunks(
                     if heun:
                         vstore(fh, g, g_prev)
                         vstore(k1, g, f_prev)
-                    v_pp = vsplat(0.0)  # start velocity of cylinder j-2
-                    va_pp = vsplat(0.0)  # first stage velocity of cylinder j-2
-                    k2_pp = vsplat(0.0)  # force k2 of contact j-2
-                    for j in range(1, N + 1):
-                        if j < N:
+                    if not damped:  # every chi is 0: a contact's force is its Hertz force
+                        for j in range(1, N):
+                            u1 = vload(u, j * W + g)
+                            fj = _hertz(u_prev - u1, beta)
+                            vstore(force, (j - 1) * W + g, f_prev - fj)
+                            u_prev = u1
+                            f_prev = fj
+                        gj = _hertz(far_rest + u_prev, beta) if far_wall == 1 else zero
+                        fj = _far_end_force(gj, x0[N], zero, far_wall, f0)  # chi = 0: no d'
+                        vstore(force, (N - 1) * W + g, f_prev - fj)
+                        continue
+                    # contact 1 (the far end if N = 1), and the actuator's k2 at cylinder 0's
+                    # stage velocity
+                    if N > 1:
+                        u1 = vload(u, W + g)
+                        v1 = vload(ud, W + g)
+                        gj = _hertz(u_prev - u1, beta)
+                        fj = _dashpot(gj, vsplat(x0[1]), v_prev - v1)
+                    else:
+                        u1 = zero
+                        v1 = zero
+                        gj = _hertz(far_rest + u_prev, beta) if far_wall == 1 else zero
+                        fj = _far_end_force(gj, x0[1], v_prev, far_wall, f0)
+                    if heun:
+                        vstore(fh, W + g, gj)
+                        vstore(k1, W + g, fj)
+                    va_pp = vfma(vsplat(cs1[0]), f_prev - fj, v_prev)  # cylinder j-2's va
+                    k2_pp = _actuator_force(g_prev, x0[0], wl, dd, va_pp, drive_force)
+                    v_pp = v_prev  # cylinder j-2's start velocity
+                    u_prev, v_prev, g_prev, f_prev = u1, v1, gj, fj
+                    if heun:  # the second stage velocities into vs; fh and k1 for pass 3
+                        for j in range(2, N):
                             u1 = vload(u, j * W + g)
                             v1 = vload(ud, j * W + g)
-                            gj = _hertz(d0[j] + u_prev - u1, beta)
-                            fj = _dashpot(gj, x0[j], v_prev - v1)
-                        else:  # the far end: a wall at rest, or the preload on a free end
-                            u1 = vsplat(0.0)
-                            v1 = vsplat(0.0)
-                            gj = _hertz(d0[N] + u_prev, beta) if far_wall == 1 else vsplat(0.0)
-                            fj = _far_end_force(gj, x0[N], v_prev, far_wall, f0)
-                        if heun:
+                            gj = _hertz(u_prev - u1, beta)
+                            fj = _dashpot(gj, vbcast(x0, j), v_prev - v1)
                             vstore(fh, j * W + g, gj)
                             vstore(k1, j * W + g, fj)
-                        if not damped:
-                            vstore(force, (j - 1) * W + g, f_prev - fj)
-                        else:
-                            va = v_prev + (hk * im0[j - 1] * first_stage) * (f_prev - fj)
-                            if j == 1:
-                                k2 = _actuator_force(g_prev, x0[0], wl, dd, va, drive_force)
-                            else:
-                                k2 = _dashpot(g_prev, x0[j - 1], va_pp - va)
-                                # cylinder j-2's second stage velocity (Heun) or force
-                                if heun:
-                                    step = hk * im0[j - 2] * (2.0 / 3.0)
-                                    vstore(vs, (j - 2) * W + g, v_pp + step * (k2_pp - k2))
-                                else:
-                                    vstore(force, (j - 2) * W + g, k2_pp - k2)
-                            v_pp = v_prev
-                            va_pp = va
-                            k2_pp = k2
-                        u_prev = u1
-                        v_prev = v1
-                        g_prev = gj
-                        f_prev = fj
-                    if damped:  # the far-end contact's k2; the last cylinder's force or vb
-                        k2 = _far_end_force(g_prev, x0[N], va_pp, far_wall, f0)
+                            chi_l, c1 = vbcast(x0, j - 1), vbcast(cs1, j - 1)
+                            va, k2 = _stage(v_prev, f_prev, fj, va_pp, g_prev, chi_l, c1)
+                            vstore(vs, (j - 2) * W + g, vfma(vbcast(cs2, j - 2), k2_pp - k2, v_pp))
+                            v_pp, va_pp, k2_pp = v_prev, va, k2
+                            u_prev, v_prev, g_prev, f_prev = u1, v1, gj, fj
+                    else:  # the midpoint: k2 acts on the cylinders
+                        for j in range(2, N):
+                            u1 = vload(u, j * W + g)
+                            v1 = vload(ud, j * W + g)
+                            gj = _hertz(u_prev - u1, beta)
+                            fj = _dashpot(gj, vbcast(x0, j), v_prev - v1)
+                            chi_l, c1 = vbcast(x0, j - 1), vbcast(cs1, j - 1)
+                            va, k2 = _stage(v_prev, f_prev, fj, va_pp, g_prev, chi_l, c1)
+                            vstore(force, (j - 2) * W + g, k2_pp - k2)
+                            va_pp, k2_pp = va, k2
+                            u_prev, v_prev, g_prev, f_prev = u1, v1, gj, fj
+                    if N > 1:  # the far end: cylinder N-1's stage velocity, contact N-1's k2
+                        gj = _hertz(far_rest + u_prev, beta) if far_wall == 1 else zero
+                        fj = _far_end_force(gj, x0[N], v_prev, far_wall, f0)
                         if heun:
-                            step = hk * im0[N - 1] * (2.0 / 3.0)
-                            vstore(vs, (N - 1) * W + g, v_pp + step * (k2_pp - k2))
+                            vstore(fh, N * W + g, gj)
+                            vstore(k1, N * W + g, fj)
+                        va, k2 = _stage(
+                            v_prev, f_prev, fj, va_pp, g_prev, vsplat(x0[N - 1]), vsplat(cs1[N - 1])
+                        )
+                        if heun:
+                            vstore(vs, (N - 2) * W + g, vfma(vsplat(cs2[N - 2]), k2_pp - k2, v_pp))
                         else:
-                            vstore(force, (N - 1) * W + g, k2_pp - k2)
+                            vstore(force, (N - 2) * W + g, k2_pp - k2)
+                        v_pp, va_pp, k2_pp, g_prev = v_prev, va, k2, gj
+                    # the far-end contact's k2; the last cylinder's force or second stage
+                    k2 = _far_end_force(g_prev, x0[N], va_pp, far_wall, f0)
+                    if heun:
+                        vstore(vs, (N - 1) * W + g, vfma(vsplat(cs2[N - 1]), k2_pp - k2, v_pp))
+                    else:
+                        vstore(force, (N - 1) * W + g, k2_pp - k2)
                 if not (damped and heun):
                     continue
                 # ---- pass 3 (damped): the forces k3 at the second stage velocities, and the
@@ -730,7 +790,7 @@ def run_chunks(
                     for j in range(1, N + 1):
                         if j < N:
                             v1 = vload(vs, j * W + g)
-                            fj = _dashpot(vload(fh, j * W + g), x0[j], v_prev - v1)
+                            fj = _dashpot(vload(fh, j * W + g), vbcast(x0, j), v_prev - v1)
                         else:
                             v1 = vsplat(0.0)
                             fj = _far_end_force(vload(fh, j * W + g), x0[N], v_prev, far_wall, f0)

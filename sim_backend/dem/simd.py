@@ -12,6 +12,8 @@ Operations (all elementwise, in numba-compiled code only)::
     v = vload(a, i)          # a[i : i + 4] of a C-contiguous 1-D float64 array (no bounds check)
     vstore(a, i, v)          # a[i : i + 4] = v
     v = vsplat(x)            # (x, x, x, x)
+    v = vbcast(a, i)         # (a[i],) * 4 of a C-contiguous 1-D float64 array (no bounds check,
+                             # no negative index: one broadcast load)
     v + w, v - w, v * w      # also with a float on either side
     vfma(a, b, c)            # a * b + c, one rounding
     vmax(v, w), vsqrt(v)
@@ -36,7 +38,19 @@ if TYPE_CHECKING:
     import numpy as np
     from numpy.typing import NDArray
 
-__all__ = ["LANES", "Vec4", "vec4", "vfma", "vlane", "vload", "vmax", "vsplat", "vsqrt", "vstore"]
+__all__ = [
+    "LANES",
+    "Vec4",
+    "vbcast",
+    "vec4",
+    "vfma",
+    "vlane",
+    "vload",
+    "vmax",
+    "vsplat",
+    "vsqrt",
+    "vstore",
+]
 
 #: lanes of one vector
 LANES = 4
@@ -107,6 +121,21 @@ def _vstore(typingctx: Any, arr: Any, idx: Any, val: Any) -> Any:
         return context.get_dummy_value()
 
     return types.none(arr, idx, val), codegen
+
+
+@intrinsic
+def _vbcast(typingctx: Any, arr: Any, idx: Any) -> Any:
+    """``(arr[idx],) * 4``: one broadcast load, without numba's handling of a negative index."""
+    _check_array(arr, idx)
+
+    def codegen(context: Any, builder: ir.IRBuilder, sig: Any, args: Any) -> Any:
+        data = context.make_array(sig.args[0])(context, builder, args[0]).data
+        x = builder.load(builder.gep(data, [args[1]], inbounds=True), align=8)
+        v = builder.insert_element(ir.Constant(_VT, ir.Undefined), x, ir.Constant(_I32, 0))
+        zeros = ir.Constant(ir.VectorType(_I32, LANES), [0] * LANES)
+        return builder.shuffle_vector(v, v, zeros)
+
+    return vec4(arr, idx), codegen
 
 
 @intrinsic
@@ -219,6 +248,7 @@ if TYPE_CHECKING:  # what the kernel's annotations and mypy see
     def vload(arr: NDArray[np.float64], idx: int) -> Vec4: ...
     def vstore(arr: NDArray[np.float64], idx: int, val: Vec4) -> None: ...
     def vsplat(x: float) -> Vec4: ...
+    def vbcast(arr: NDArray[np.float64], idx: int) -> Vec4: ...
     def vlane(v: Vec4, j: int) -> float: ...
     def vfma(a: Vec4, b: Vec4, c: Vec4) -> Vec4: ...
     def vsqrt(a: Vec4) -> Vec4: ...
@@ -226,5 +256,5 @@ if TYPE_CHECKING:  # what the kernel's annotations and mypy see
 
 else:
     Vec4 = Vec4Type
-    vload, vstore, vsplat, vlane = _vload, _vstore, _vsplat, _vlane
+    vload, vstore, vsplat, vbcast, vlane = _vload, _vstore, _vsplat, _vbcast, _vlane
     vfma, vsqrt, vmax = _vfma, _vsqrt, _vmax

@@ -23,9 +23,9 @@ from sim_backend.dem.spec import benchmark_chain_spec
 
 #: NUMERICS_VERSION these checksums belong to, and sha256 of (velocity, energy) per batch size
 PINNED = {
-    "version": "3: steps split at the burst ends",
-    4: "2b29e8e066c24d7aadc40bc6c599983f0c7db17e8ed2ef16d6d82e1ca7bdb833",
-    16: "ae6dcc8209a8a109b4023b77e3dfcac6d4cb363d831e04f86529e0136a5c483a",
+    "version": "4: overlaps from shifted displacements, fused dashpot and stage",
+    4: "e45992e720d993c5d9351c1fcd4e5e38be3cdc5c3f9a433330f5e9484a38df80",
+    16: "6b7a895c1c9f0664b0525b6ec3eef6cdb1b815920c990cc8ef6a2b5c42377184",
 }
 
 

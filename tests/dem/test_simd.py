@@ -10,7 +10,7 @@ from numba.core.errors import TypingError
 
 from instruments.burst import Burst
 from sim_backend import dem
-from sim_backend.dem.simd import vfma, vlane, vload, vmax, vsplat, vsqrt, vstore
+from sim_backend.dem.simd import vbcast, vfma, vlane, vload, vmax, vsplat, vsqrt, vstore
 
 
 @numba.njit(cache=True)
@@ -56,6 +56,20 @@ def test_fma_rounds_once_and_plain_operations_do_not_fuse() -> None:
     assert fused == fused_lane3 == -(2.0**-60)
     assert plain == 0.0
     assert lane == 1.0 + e and splat_int == 7.0
+
+
+@numba.njit(cache=True)
+def _bcast_lanes(a: np.ndarray, i: int) -> tuple[float, float, float, float]:
+    v = vbcast(a, i)
+    return vlane(v, 0), vlane(v, 1), vlane(v, 2), vlane(v, 3)
+
+
+def test_vbcast_gives_one_element_in_every_lane() -> None:
+    a = np.array([1.5, -2.25, 3.0e-300, np.inf])
+    for i in range(4):
+        assert _bcast_lanes(a, i) == (a[i],) * 4
+    with pytest.raises(TypingError, match="C-contiguous 1-D float64"):
+        _bcast_lanes(np.zeros((2, 4)), 0)
 
 
 def test_vload_refuses_arrays_it_cannot_read_as_lanes() -> None:
