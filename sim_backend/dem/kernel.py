@@ -662,6 +662,8 @@ def run_chunks(
                 if damped:
                     for i in range(N):
                         cs1[i] = hk * im0[i] * first_stage
+                if damped and heun:
+                    for i in range(N):
                         cs2[i] = hk * im0[i] * (2.0 / 3.0)
                 # ---- the drives at t (in a split step: on the sub-step's side of its breakpoints)
                 side = kside[kk]
