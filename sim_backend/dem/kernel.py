@@ -686,9 +686,9 @@ def run_chunks(
                 # pass 3, which gives the forces k3 at vb and the kick's (k1 + 3 k3) / 4).
                 # Each case has a loop over the contacts between cylinders of its own, without a
                 # branch inside (first contact and far end before and after it): 25 instructions
-                # a contact against 58 with the cases as branches in one loop, 10-12 cycles a
-                # 4-lane vector against 17-20 (docs/performance.md, section 3, "Pass 2 without
-                # branches"). Its coefficients by vbcast: no negative-index check per read.
+                # a contact against 58 with the cases as branches in one loop, 10 cycles a 4-lane
+                # vector against 16 (docs/performance.md, section 3, "Pass 2 without branches").
+                # Its coefficients by vbcast: no negative-index check per read.
                 zero = vsplat(0.0)
                 for g in range(0, W, 4):
                     wl = vload(wall, g)
