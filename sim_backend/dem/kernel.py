@@ -24,9 +24,11 @@ four lanes to a SIMD vector (:mod:`sim_backend.dem.simd`): every operation below
 trajectories at once, and the per-lane arithmetic is the same whatever the chunk, so a drive's
 result does not depend on the batch around it. One kick costs two passes (three with Heun
 kicks): one over the cylinders applies the previous kick to the momenta, drifts every mode and
-sums the primary displacement and velocity (``u``, ``u'``) in registers; one along the contacts,
-carrying the neighbours' values in registers, gives the Hertz forces, the forces at the start
-velocities and, one contact behind, the stage velocities and the forces there.
+sums the primary displacement and velocity (``u``, ``u'``) in registers (``u`` from a shift per
+cylinder that holds the rest overlaps, so that an overlap is one subtraction); one along the
+contacts, carrying the neighbours' values in registers, gives the Hertz forces, the forces at the
+start velocities and, one contact behind, the stage velocities and the forces there (one loop
+without branches per case: undamped, midpoint, Heun; the chain's ends outside it).
 
 The chunks are independent: :func:`run_batch` hands them to ``numba.get_num_threads()`` threads
 that each call the compiled :func:`run_chunks` (serial, without the GIL) on the next chunk not
