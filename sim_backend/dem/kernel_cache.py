@@ -12,11 +12,18 @@ While the first call of a process compiles (or loads) the kernel, :func:`compile
 the reporter set by :func:`set_compile_reporter` (the command-line tools print one line, and the
 elapsed time on a terminal): ``("start" | "tick" | "done", elapsed_s, cache_folder, cold)``.
 ``biafc warmup`` compiles it ahead of time.
+
+numba names a compiled function's files by its first line (``kernel.run_chunks-396.py311.nbi`` and
+``.1.nbc``), so an update that moves a function leaves its old files behind, about 0.9 MB for the
+kernel each time. :func:`remove_stale_compiled` deletes them, once per process, after the kernel's
+first run.
 """
 
 from __future__ import annotations
 
 import os
+import re
+import sys
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -32,7 +39,9 @@ __all__ = [
     "kernel_cache_dir",
     "kernel_cached_on_disk",
     "kernel_loaded",
+    "remove_stale_compiled",
     "set_compile_reporter",
+    "stale_compiled_files",
 ]
 
 #: (phase "start" | "tick" | "done", elapsed s, cache folder, cold: nothing on disk yet)
@@ -43,6 +52,7 @@ _ROOT = Path(__file__).resolve().parents[2]
 _REPORTER: CompileReporter | None = None
 _INSTALLED = False
 _ANNOUNCED = False
+_SWEPT = False
 
 
 def kernel_cache_dir() -> Path:
@@ -177,3 +187,77 @@ def compile_notice(delay_s: float = 1.0, tick_s: float = 1.0) -> Iterator[None]:
         if started.is_set():
             reporter("done", time.monotonic() - t0, folder, cold)
         _ANNOUNCED = False
+
+
+def stale_compiled_files(
+    folder: Path, current: dict[str, int], tag: str, sources: Path | None = None
+) -> list[Path]:
+    """The files in ``folder`` that numba wrote for an earlier source: an index
+    ``<stem>-<line>.<tag>.nbi`` or data ``<stem>-<line>.<tag>.<n>.nbc`` of a function of ``current``
+    (its stem, ``"kernel.run_chunks"``, and its first line now) at another line, or of a module
+    that ``sources`` (the folder of the sources cached here) no longer holds. Files of another
+    Python (another ``tag``, ``"py311"``) are another interpreter's, and kept."""
+    pattern = re.compile(r"(?P<stem>.+)-(?P<line>\d+)\." + re.escape(tag) + r"\.(?:nbi|\d+\.nbc)")
+    stale = []
+    try:
+        names = sorted(p.name for p in folder.iterdir())
+    except OSError:
+        return []
+    for name in names:
+        m = pattern.fullmatch(name)
+        if m is None:
+            continue
+        stem, line = m["stem"], int(m["line"])
+        moved = stem in current and line != current[stem]
+        module = stem.split(".", 1)[0]
+        gone = sources is not None and not (sources / f"{module}.py").exists()
+        if moved or gone:
+            stale.append(folder / name)
+    return stale
+
+
+def _compiled_functions() -> dict[Path, tuple[Path, dict[str, int]]]:
+    """The project's cached numba functions loaded in this process: per cache folder, the folder
+    of their sources and their file stems and first lines (numba's internals; empty where they
+    differ)."""
+    from numba.core.registry import CPUDispatcher
+
+    found: dict[Path, tuple[Path, dict[str, int]]] = {}
+    for mod_name, mod in list(sys.modules.items()):
+        source = getattr(mod, "__file__", None)
+        if not mod_name.startswith("sim_backend.") or not isinstance(source, str):
+            continue
+        for obj in list(vars(mod).values()):
+            cache = getattr(obj, "_cache", None) if isinstance(obj, CPUDispatcher) else None
+            index = getattr(getattr(cache, "_cache_file", None), "_index_name", None)
+            folder = getattr(cache, "_cache_path", None)
+            code = getattr(getattr(obj, "py_func", None), "__code__", None)
+            if not (isinstance(index, str) and isinstance(folder, str) and code is not None):
+                continue
+            if code.co_filename != source:  # imported from another module: counted there
+                continue
+            m = re.fullmatch(r"(?P<stem>.+)-(?P<line>\d+)\.py\d+\.nbi", index)
+            if m:
+                entry = found.setdefault(Path(folder), (Path(source).parent, {}))
+                entry[1][m["stem"]] = int(m["line"])
+    return found
+
+
+def remove_stale_compiled() -> list[Path]:
+    """Once per process (later calls do nothing): delete the files an earlier source of the
+    project's loaded numba functions left in their cache folders (:func:`stale_compiled_files`);
+    the deleted paths. A file that cannot be deleted stays."""
+    global _SWEPT
+    if _SWEPT:
+        return []
+    _SWEPT = True
+    tag = f"py{sys.version_info.major}{sys.version_info.minor}"
+    removed = []
+    for folder, (sources, current) in _compiled_functions().items():
+        for path in stale_compiled_files(folder, current, tag, sources):
+            try:
+                path.unlink()
+            except OSError:
+                continue
+            removed.append(path)
+    return removed

@@ -18,7 +18,7 @@ from sim_backend.dem.defaults import DEFAULT_DT_S, DEFAULT_DT_TOP_HZ, DEFAULT_IN
 from sim_backend.dem.drive import Drive
 from sim_backend.dem.errors import step_doubling_error
 from sim_backend.dem.kernel import drift_coefficients, run_batch
-from sim_backend.dem.kernel_cache import compile_notice
+from sim_backend.dem.kernel_cache import compile_notice, remove_stale_compiled
 from sim_backend.dem.step_limit import StepTooLargeError, check_step
 from sim_backend.dem.threads import one_blas_thread
 
@@ -397,6 +397,7 @@ def _simulate(
     )  # fmt: skip
     with _KERNEL_LOCK, compile_notice():
         run_batch(*args)
+        remove_stale_compiled()  # an earlier source's compiled kernel, once per process
     n_done = energy[:, 3].astype(np.int64)
     if stop_every > 0:
         n_samples = int(n_done.max())

@@ -71,3 +71,55 @@ def test_biafc_warmup_command(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["warmup", "--quiet"]) == 0
     out = capsys.readouterr().out
     assert out.startswith("warm: DEM kernel ready") and "cache" in out
+
+
+def test_stale_compiled_files_are_another_lines_or_a_removed_modules(tmp_path: Path) -> None:
+    """numba names a function's files by its first line: those of another line, and those of a
+    module the sources no longer hold, are stale; another Python's and unknown files are kept."""
+    sources = tmp_path / "src"
+    sources.mkdir()
+    (sources / "kernel.py").write_text("")
+    folder = tmp_path / "cache"
+    folder.mkdir()
+    names = {
+        "kernel.run_chunks-396.py311.nbi": False,  # the current source's
+        "kernel.run_chunks-396.py311.1.nbc": False,
+        "kernel.run_chunks-382.py311.nbi": True,  # an earlier source's
+        "kernel.run_chunks-382.py311.1.nbc": True,
+        "kernel.run_chunks-382.py312.nbi": False,  # another Python's
+        "kernel.helper-10.py311.nbi": False,  # not loaded now: unknown
+        "step_map._scan-234.py311.nbi": True,  # a module gone from the sources
+        "step_map._scan-234.py311.2.nbc": True,
+        "notes.txt": False,
+    }
+    for name in names:
+        (folder / name).write_text("x")
+    stale = kernel_cache.stale_compiled_files(folder, {"kernel.run_chunks": 396}, "py311", sources)
+    assert sorted(p.name for p in stale) == sorted(n for n, s in names.items() if s)
+    assert kernel_cache.stale_compiled_files(tmp_path / "missing", {}, "py311") == []
+
+
+def test_a_process_first_run_removes_an_earlier_sources_compiled_kernel(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    from instruments.burst import Burst
+    from sim_backend import dem
+    from sim_backend.dem import kernel
+
+    folder = Path(kernel.run_chunks._cache._cache_path)
+    current = folder / kernel.run_chunks._cache._cache_file._index_name
+    tag = current.name.rsplit(".", 2)[1]
+    planted = [
+        folder / f"kernel.run_chunks-1.{tag}.nbi",
+        folder / f"kernel.run_chunks-1.{tag}.1.nbc",
+    ]
+    folder.mkdir(parents=True, exist_ok=True)
+    for path in planted:
+        path.write_text("an earlier source's kernel")
+    monkeypatch.setattr(kernel_cache, "_SWEPT", False)
+    chain = dem.build_chain(dem.default_chain_spec())
+    drive = dem.Drive("ltr", "displacement", chain.delta0_m, burst=Burst(8.92e3, 5.0))
+    dem.simulate(chain, [drive], duration_s=1e-4)
+    assert not any(path.exists() for path in planted)
+    assert current.exists()
+    assert kernel_cache.remove_stale_compiled() == []  # once per process
