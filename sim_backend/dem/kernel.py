@@ -728,7 +728,7 @@ def run_chunks(
                         u1 = zero
                         v1 = zero
                         gj = _hertz(far_rest + u_prev, beta) if far_wall == 1 else zero
-                        fj = _far_end_force(gj, x0[1], v_prev, far_wall, f0)
+                        fj = _far_end_force(gj, x0[N], v_prev, far_wall, f0)
                     if heun:
                         vstore(fh, W + g, gj)
                         vstore(k1, W + g, fj)

@@ -53,6 +53,8 @@ _REPORTER: CompileReporter | None = None
 _INSTALLED = False
 _ANNOUNCED = False
 _SWEPT = False
+#: numba's name of a cached function's index (``kind`` nbi) or data file (``1.nbc``)
+_CACHED_FILE = re.compile(r"(?P<stem>.+)-(?P<line>\d+)\.(?P<tag>py\d+)\.(?P<kind>nbi|\d+\.nbc)")
 
 
 def kernel_cache_dir() -> Path:
@@ -197,15 +199,14 @@ def stale_compiled_files(
     (its stem, ``"kernel.run_chunks"``, and its first line now) at another line, or of a module
     that ``sources`` (the folder of the sources cached here) no longer holds. Files of another
     Python (another ``tag``, ``"py311"``) are another interpreter's, and kept."""
-    pattern = re.compile(r"(?P<stem>.+)-(?P<line>\d+)\." + re.escape(tag) + r"\.(?:nbi|\d+\.nbc)")
     stale = []
     try:
         names = sorted(p.name for p in folder.iterdir())
     except OSError:
         return []
     for name in names:
-        m = pattern.fullmatch(name)
-        if m is None:
+        m = _CACHED_FILE.fullmatch(name)
+        if m is None or m["tag"] != tag:
             continue
         stem, line = m["stem"], int(m["line"])
         moved = stem in current and line != current[stem]
@@ -236,8 +237,8 @@ def _compiled_functions() -> dict[Path, tuple[Path, dict[str, int]]]:
                 continue
             if code.co_filename != source:  # imported from another module: counted there
                 continue
-            m = re.fullmatch(r"(?P<stem>.+)-(?P<line>\d+)\.py\d+\.nbi", index)
-            if m:
+            m = _CACHED_FILE.fullmatch(index)
+            if m and m["kind"] == "nbi":
                 entry = found.setdefault(Path(folder), (Path(source).parent, {}))
                 entry[1][m["stem"]] = int(m["line"])
     return found
