@@ -37,8 +37,10 @@ default scheme with midpoint and with Heun kicks at 2 us to 0.125 us against yos
 15.625 ns; the cheapest rung under each target and the reference's own last change.
 The instruction floor by pass (:func:`floor_rows`): per step and trajectory of the streaming
 sweep, each pass's operations by class, its flops floor and its instruction floor with what
-bounds it, and the measured rates. ``DEM_SWEEP_PARTS`` (comma list of ``batch``, ``floor``,
-``scaling``, ``accuracy``; default all) picks the parts.
+bounds it, and the measured rates. The streaming sweep on one thread (:func:`one_thread_rows`):
+32 trajectories, in turns with the one-thread peak, against the flops floor of one thread.
+``DEM_SWEEP_PARTS`` (comma list of ``batch``, ``floor``, ``one_thread``, ``scaling``,
+``accuracy``; default all) picks the parts.
 """
 
 from __future__ import annotations
@@ -80,10 +82,12 @@ def rel_l2(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def run() -> dict[str, Any]:
-    parts = os.environ.get("DEM_SWEEP_PARTS", "batch,floor,scaling,accuracy").split(",")
+    parts = os.environ.get("DEM_SWEEP_PARTS", "batch,floor,one_thread,scaling,accuracy").split(",")
     out: dict[str, Any] = _batch() if "batch" in parts else {}
     if "floor" in parts:
         out.update(_floor_summary(*floor_rows()))
+    if "one_thread" in parts:
+        out.update(_one_thread_summary(one_thread_rows()))
     if "scaling" in parts:
         out.update(_scaling_summary(scaling_rows()))
     if "accuracy" in parts:
@@ -274,6 +278,83 @@ def _batch() -> dict[str, Any]:
         }
     )
     return out
+
+
+# --- the streaming sweep on one thread against one thread's floor (issue 18) -----------------
+
+#: trajectories of the one-thread sweep (2 directions x 16 amplitudes: four chunks of 8 lanes)
+ONE_THREAD_BATCH = 32
+#: rounds of the one-thread comparison: each the peak, then the sweep
+ONE_THREAD_ROUNDS = 9
+
+
+def one_thread_rows(
+    batch: int = ONE_THREAD_BATCH, rounds: int = ONE_THREAD_ROUNDS, duration_s: float = DURATION_S
+) -> list[dict[str, Any]]:
+    """The streaming sweep on one numba thread against the flops floor of one thread, in turns.
+
+    Per round: the one-thread peak (``benchmarks._floor.peak_flops``, best of 3), then one
+    :func:`sim_backend.dem.sweep.sweep` of ``batch`` trajectories (2 directions x batch/2
+    amplitudes, 0.01 to 4 delta0, far end in float32, as the scaling rows), so that every ratio
+    compares a sweep with the peak measured right before it. On a shared host whose speed moves
+    by 1.5x within minutes these pairs are where the kernel's own distance from the floor is read
+    (two threads add the second vCPU's neighbours: each thread ran about 17 % slower there on
+    2026-11-27). One row per round: ns per step and trajectory, the floor's (flops per step over
+    the peak), and their ratio. Restores the thread count it found."""
+    import numba
+
+    from benchmarks._floor import flops_per_step, peak_flops
+    from sim_backend.dem.simulation import DEFAULT_INTEGRATOR, INTEGRATORS
+    from sim_backend.dem.sweep import sweep
+
+    chain = dem.build_chain(benchmark_chain_spec())
+    drives = _drives(chain, chain.delta0_m * np.geomspace(0.01, 4.0, batch // 2))
+    threads = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        first = dem.simulate(chain, drives[:2], duration_s=1e-4, sample_rate_Hz=RATE_HZ)
+        n_sub = int(first.meta["substeps_per_sample"])
+        steps = n_sub * math.floor(duration_s * RATE_HZ + 1e-9)
+        counts = (chain.n, chain.n_modes + 1, len(INTEGRATORS[DEFAULT_INTEGRATOR][2]), n_sub)
+        fps = flops_per_step(*counts, chain.contact_damping_ratio > 0, 1)
+        rows: list[dict[str, Any]] = []
+        for r in range(rounds):
+            peak = peak_flops(repeats=3)
+            t0 = time.perf_counter()
+            sweep(chain, drives, duration_s=duration_s, sample_rate_Hz=RATE_HZ)
+            wall = time.perf_counter() - t0
+            ns = wall / (steps * batch) * 1e9
+            floor_ns = fps / peak * 1e9
+            rows.append(
+                {
+                    "round": r + 1,
+                    "wall_s": wall,
+                    "ns_per_step_trajectory": ns,
+                    "peak_flops_per_s": peak,
+                    "floor_ns": floor_ns,
+                    "vs_flops_floor": ns / floor_ns,
+                }
+            )
+    finally:
+        numba.set_num_threads(threads)
+    return rows
+
+
+def _one_thread_summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    _print_table("the streaming sweep on one thread, in turns with the one-thread peak", rows)
+    ratios = [r["vs_flops_floor"] for r in rows]
+    ns = [r["ns_per_step_trajectory"] for r in rows]
+    best_peak = max(r["peak_flops_per_s"] for r in rows)
+    floor_best_ns = rows[0]["floor_ns"] * rows[0]["peak_flops_per_s"] / best_peak
+    return {
+        "one_thread_table": rows,
+        "one_thread_ns_per_step_trajectory_best": min(ns),
+        "one_thread_ns_per_step_trajectory_median": float(np.median(ns)),
+        "one_thread_floor_ns_best_peak": floor_best_ns,
+        "one_thread_vs_flops_floor_best": min(ratios),
+        "one_thread_vs_flops_floor_median": float(np.median(ratios)),
+        "one_thread_best_over_best_peak": min(ns) / floor_best_ns,
+    }
 
 
 # --- streaming sweeps at growing batch sizes (issue 18) --------------------------------------

@@ -255,3 +255,18 @@ def test_rate_kernels_issue_the_instructions_they_count(body: str, counts: dict[
     assert n >= 1
     for ins, c in counts.items():
         assert loop.count(ins) == c * n, (body, ins, loop.count(ins), c * n)
+
+
+def test_one_thread_sweep_rows_pair_each_sweep_with_its_peak() -> None:
+    """``benchmarks.dem_sweep.one_thread_rows``, briefly: one row per round with the sweep's
+    time per step and trajectory over the floor measured right before it, on one thread, and
+    the thread count restored afterwards."""
+    from benchmarks.dem_sweep import one_thread_rows
+
+    threads = numba.get_num_threads()
+    rows = one_thread_rows(batch=4, rounds=2, duration_s=1e-3)
+    assert numba.get_num_threads() == threads
+    assert [r["round"] for r in rows] == [1, 2]
+    for r in rows:
+        assert r["ns_per_step_trajectory"] > 0 and r["floor_ns"] > 0
+        assert r["vs_flops_floor"] == pytest.approx(r["ns_per_step_trajectory"] / r["floor_ns"])
