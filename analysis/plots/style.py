@@ -77,15 +77,26 @@ def style() -> AbstractContextManager[None]:
 
 
 def save_figure(fig: Figure, out_dir: str | Path, name: str) -> list[Path]:
-    """Write ``fig`` as ``out_dir/name.png`` and ``.pdf``; returns the paths."""
+    """Write ``fig`` as ``out_dir/name.png`` and ``.pdf``; returns the paths.
+
+    The layout (constrained: every tick label measured) is computed once, for the first format,
+    and the others keep its positions: the figures of the ``ltr_highamp`` run took 3.03 s
+    against 3.75 s with a layout per format (medians of 6 interleaved pairs), and the PDF's own
+    layout had differed from the PNG's by at most 0.3 pt. The figure's layout engine is
+    restored afterwards."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = []
-    with matplotlib.rc_context(cast(Any, RC)):
-        for fmt in FORMATS:
-            p = out / f"{name}.{fmt}"
-            fig.savefig(p, dpi=RC["savefig.dpi"])
-            paths.append(p)
+    engine = fig.get_layout_engine()
+    try:
+        with matplotlib.rc_context(cast(Any, RC)):
+            for fmt in FORMATS:
+                p = out / f"{name}.{fmt}"
+                fig.savefig(p, dpi=RC["savefig.dpi"])
+                paths.append(p)
+                fig.set_layout_engine("none")  # the next formats keep this layout
+    finally:
+        fig.set_layout_engine(engine)
     return paths
 
 
