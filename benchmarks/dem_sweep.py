@@ -296,11 +296,10 @@ def one_thread_rows(
     Per round: the one-thread peak (``benchmarks._floor.peak_flops``, best of 3), then one
     :func:`sim_backend.dem.sweep.sweep` of ``batch`` trajectories (2 directions x batch/2
     amplitudes, 0.01 to 4 delta0, far end in float32, as the scaling rows), so that every ratio
-    compares a sweep with the peak measured right before it. On a shared host whose speed moves
-    by 1.5x within minutes these pairs are where the kernel's own distance from the floor is read
-    (two threads add the second vCPU's neighbours: each thread ran about 17 % slower there on
-    2026-11-27). One row per round: ns per step and trajectory, the floor's (flops per step over
-    the peak), and their ratio. Restores the thread count it found."""
+    compares a sweep with the peak measured right before it: on a shared host whose speed moves
+    by 1.5x within minutes, pairs measured together are what the kernel's distance from the floor
+    can be read from. One row per round: ns per step and trajectory, the floor's (flops per step
+    over the peak), and their ratio. Restores the thread count it found."""
     import numba
 
     from benchmarks._floor import flops_per_step, peak_flops
