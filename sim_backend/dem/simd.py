@@ -93,9 +93,20 @@ def _check_array(arr: Any, idx: Any) -> None:
         )
 
 
-def _lane_ptr(context: Any, builder: ir.IRBuilder, aryty: Any, ary: Any, idx: Any) -> Any:
+def _element_ptr(context: Any, builder: ir.IRBuilder, aryty: Any, ary: Any, idx: Any) -> Any:
     data = context.make_array(aryty)(context, builder, ary).data
-    return builder.bitcast(builder.gep(data, [idx], inbounds=True), _VT.as_pointer())
+    return builder.gep(data, [idx], inbounds=True)
+
+
+def _lane_ptr(context: Any, builder: ir.IRBuilder, aryty: Any, ary: Any, idx: Any) -> Any:
+    return builder.bitcast(_element_ptr(context, builder, aryty, ary, idx), _VT.as_pointer())
+
+
+def _splat(builder: ir.IRBuilder, x: Any) -> Any:
+    """The double ``x`` in every lane."""
+    v = builder.insert_element(ir.Constant(_VT, ir.Undefined), x, ir.Constant(_I32, 0))
+    zeros = ir.Constant(ir.VectorType(_I32, LANES), [0] * LANES)
+    return builder.shuffle_vector(v, v, zeros)
 
 
 @intrinsic
@@ -129,11 +140,8 @@ def _vbcast(typingctx: Any, arr: Any, idx: Any) -> Any:
     _check_array(arr, idx)
 
     def codegen(context: Any, builder: ir.IRBuilder, sig: Any, args: Any) -> Any:
-        data = context.make_array(sig.args[0])(context, builder, args[0]).data
-        x = builder.load(builder.gep(data, [args[1]], inbounds=True), align=8)
-        v = builder.insert_element(ir.Constant(_VT, ir.Undefined), x, ir.Constant(_I32, 0))
-        zeros = ir.Constant(ir.VectorType(_I32, LANES), [0] * LANES)
-        return builder.shuffle_vector(v, v, zeros)
+        ptr = _element_ptr(context, builder, sig.args[0], args[0], args[1])
+        return _splat(builder, builder.load(ptr, align=8))
 
     return vec4(arr, idx), codegen
 
@@ -145,10 +153,7 @@ def _vsplat(typingctx: Any, x: Any) -> Any:
         raise TypingError(f"vsplat takes a number, got {x}")
 
     def codegen(context: Any, builder: ir.IRBuilder, sig: Any, args: Any) -> Any:
-        xd = context.cast(builder, args[0], sig.args[0], types.float64)
-        v = builder.insert_element(ir.Constant(_VT, ir.Undefined), xd, ir.Constant(_I32, 0))
-        zeros = ir.Constant(ir.VectorType(_I32, LANES), [0] * LANES)
-        return builder.shuffle_vector(v, v, zeros)
+        return _splat(builder, context.cast(builder, args[0], sig.args[0], types.float64))
 
     return vec4(x), codegen
 
