@@ -385,6 +385,16 @@ def _actuator_force(
 
 
 @numba.njit(inline="always")
+def _far_end_hertz(u_last: Vec4, far_rest: float, beta: float, far_wall: int) -> Vec4:
+    """Hertz force (N) of the far-end contact: a wall at rest against the last cylinder of
+    displacement ``u_last`` (m, summed from its shift: the overlap is ``far_rest + u_last``), or
+    none on a free end."""
+    if far_wall == 1:
+        return _hertz(far_rest + u_last, beta)
+    return vsplat(0.0)
+
+
+@numba.njit(inline="always")
 def _far_end_force(fh: Vec4, chi: float, v: Vec4, far_wall: int, f0: float) -> Vec4:
     """Force (N) of the far-end contact on the last cylinder, velocity ``v`` (m/s): a wall at rest
     (Hertz force ``fh`` with its dashpot) or, on a free end, the preload ``f0``."""
@@ -713,7 +723,7 @@ def run_chunks(
                             vstore(force, (j - 1) * W + g, f_prev - fj)
                             u_prev = u1
                             f_prev = fj
-                        gj = _hertz(far_rest + u_prev, beta) if far_wall == 1 else zero
+                        gj = _far_end_hertz(u_prev, far_rest, beta, far_wall)
                         fj = _far_end_force(gj, x0[N], zero, far_wall, f0)  # chi = 0: no d'
                         vstore(force, (N - 1) * W + g, f_prev - fj)
                         continue
@@ -727,7 +737,7 @@ def run_chunks(
                     else:
                         u1 = zero
                         v1 = zero
-                        gj = _hertz(far_rest + u_prev, beta) if far_wall == 1 else zero
+                        gj = _far_end_hertz(u_prev, far_rest, beta, far_wall)
                         fj = _far_end_force(gj, x0[N], v_prev, far_wall, f0)
                     if heun:
                         vstore(fh, W + g, gj)
@@ -761,7 +771,7 @@ def run_chunks(
                             va_pp, k2_pp = va, k2
                             u_prev, v_prev, g_prev, f_prev = u1, v1, gj, fj
                     if N > 1:  # the far end: cylinder N-1's stage velocity, contact N-1's k2
-                        gj = _hertz(far_rest + u_prev, beta) if far_wall == 1 else zero
+                        gj = _far_end_hertz(u_prev, far_rest, beta, far_wall)
                         fj = _far_end_force(gj, x0[N], v_prev, far_wall, f0)
                         if heun:
                             vstore(fh, N * W + g, gj)
