@@ -81,6 +81,16 @@ def rel_l2(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return num / np.maximum(den, 1e-300)
 
 
+def _kernel_counts(chain: dem.Chain, n_sub: int) -> tuple[int, int, int, int, bool]:
+    """The arguments of ``benchmarks._floor.kernel_ops`` and ``flops_per_step`` before the
+    recorded cylinders, for the default integrator with ``n_sub`` steps a sample: cylinders,
+    block modes, kicks a step, ``n_sub``, contact dashpot on."""
+    from sim_backend.dem.simulation import DEFAULT_INTEGRATOR, INTEGRATORS
+
+    n_kicks = len(INTEGRATORS[DEFAULT_INTEGRATOR][2])
+    return chain.n, chain.n_modes + 1, n_kicks, n_sub, chain.contact_damping_ratio > 0
+
+
 def run() -> dict[str, Any]:
     parts = os.environ.get("DEM_SWEEP_PARTS", "batch,floor,one_thread,scaling,accuracy").split(",")
     out: dict[str, Any] = _batch() if "batch" in parts else {}
@@ -162,15 +172,12 @@ def floor_rows() -> tuple[list[dict[str, Any]], dict[str, float]]:
     them. Also returns the measured rates (``benchmarks._floor.instruction_rates``) and the
     peak (``peak_flops``, flop/s)."""
     from benchmarks._floor import instruction_floor, instruction_rates, kernel_ops, peak_flops
-    from sim_backend.dem.simulation import DEFAULT_INTEGRATOR, INTEGRATORS
 
     chain = dem.build_chain(benchmark_chain_spec())
     drives = _drives(chain, np.array([chain.delta0_m]))
     res = dem.simulate(chain, drives, duration_s=1e-4, sample_rate_Hz=RATE_HZ)  # warm-up
     n_sub = int(res.meta["substeps_per_sample"])
-    n_kicks = len(INTEGRATORS[DEFAULT_INTEGRATOR][2])
-    dashpot = chain.contact_damping_ratio > 0
-    ops = kernel_ops(chain.n, chain.n_modes + 1, n_kicks, n_sub, dashpot, 1)
+    ops = kernel_ops(*_kernel_counts(chain, n_sub), 1)
     peak = peak_flops(repeats=3)
     rates = instruction_rates(repeats=3)
     rates["peak_flops"] = peak
@@ -303,7 +310,6 @@ def one_thread_rows(
     import numba
 
     from benchmarks._floor import flops_per_step, peak_flops
-    from sim_backend.dem.simulation import DEFAULT_INTEGRATOR, INTEGRATORS
     from sim_backend.dem.sweep import sweep
 
     chain = dem.build_chain(benchmark_chain_spec())
@@ -314,8 +320,7 @@ def one_thread_rows(
         first = dem.simulate(chain, drives[:2], duration_s=1e-4, sample_rate_Hz=RATE_HZ)
         n_sub = int(first.meta["substeps_per_sample"])
         steps = n_sub * math.floor(duration_s * RATE_HZ + 1e-9)
-        counts = (chain.n, chain.n_modes + 1, len(INTEGRATORS[DEFAULT_INTEGRATOR][2]), n_sub)
-        fps = flops_per_step(*counts, chain.contact_damping_ratio > 0, 1)
+        fps = flops_per_step(*_kernel_counts(chain, n_sub), 1)
         rows: list[dict[str, Any]] = []
         for r in range(rounds):
             peak = peak_flops(repeats=3)
@@ -399,7 +404,6 @@ def scaling_point(batch: int, path: str) -> dict[str, Any]:
         kernel_ops,
         peak_flops,
     )
-    from sim_backend.dem.simulation import DEFAULT_INTEGRATOR, INTEGRATORS
     from sim_backend.dem.sweep import sweep
 
     chain = dem.build_chain(benchmark_chain_spec())
@@ -419,9 +423,8 @@ def scaling_point(batch: int, path: str) -> dict[str, Any]:
     peak = peak_flops(repeats=2)
     rates = instruction_rates(repeats=2)
     n_sub = int(res16.meta["substeps_per_sample"])
-    _, _, b_w = INTEGRATORS[DEFAULT_INTEGRATOR]
     recorded = 1 if path == "sweep" else chain.n
-    counts = (chain.n, chain.n_modes + 1, len(b_w), n_sub, chain.contact_damping_ratio > 0)
+    counts = _kernel_counts(chain, n_sub)
     fps = flops_per_step(*counts, recorded)
     steps = n_sub * (res16.time_s.size - 1)
     # the same number of trajectories (TRAJECTORIES) at every batch size: B = 128 runs 16
