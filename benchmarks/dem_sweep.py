@@ -295,6 +295,10 @@ ONE_THREAD_BATCH = 32
 ONE_THREAD_ROUNDS = 9
 
 
+#: the chains of the one-thread rows: the recorded benchmarks' scene and the product's default
+ONE_THREAD_CHAINS = ("dashpot 0.005", "dashpot off")
+
+
 def one_thread_rows(
     batch: int = ONE_THREAD_BATCH, rounds: int = ONE_THREAD_ROUNDS, duration_s: float = DURATION_S
 ) -> list[dict[str, Any]]:
@@ -302,45 +306,57 @@ def one_thread_rows(
 
     Per round: the one-thread peak (``benchmarks._floor.peak_flops``, best of 3), then one
     :func:`sim_backend.dem.sweep.sweep` of ``batch`` trajectories (2 directions x batch/2
-    amplitudes, 0.01 to 4 delta0, far end in float32, as the scaling rows), so that every ratio
-    compares a sweep with the peak measured right before it. One row per round: ns per step and
-    trajectory, the floor's (flops per step over that peak), and their ratio. A peak measured in a
-    slow moment lowers its round's ratio (one run on 2026-11-27 read a median of 1.10x that way,
-    against 2.1-2.5x in the runs beside it), so :func:`_one_thread_summary` reads every round
-    against the best peak of the run, as the scaling rows do. Restores the thread count it
-    found."""
+    amplitudes, 0.01 to 4 delta0, far end in float32, as the scaling rows) on each chain of
+    :data:`ONE_THREAD_CHAINS`: the benchmark chain (contact dashpot 0.005, the recorded scene)
+    and the default chain (dashpot off, what a sweep runs on unless told otherwise), so that
+    every ratio compares a sweep with the peak measured right before it. One row per round and
+    chain: ns per step and trajectory, the floor's (that chain's flops per step over the
+    round's peak), and their ratio. A peak measured in a slow moment lowers its round's ratio
+    (one run on 2026-11-27 read a median of 1.10x that way, against 2.1-2.5x in the runs beside
+    it), so :func:`_one_thread_summary` reads every round against the best peak of the run, as
+    the scaling rows do. Restores the thread count it found."""
     import numba
 
     from benchmarks._floor import flops_per_step, peak_flops
+    from sim_backend.dem.spec import default_chain_spec
     from sim_backend.dem.sweep import sweep
 
-    chain = dem.build_chain(benchmark_chain_spec())
-    drives = _drives(chain, chain.delta0_m * np.geomspace(0.01, 4.0, batch // 2))
+    specs = dict(
+        zip(ONE_THREAD_CHAINS, (benchmark_chain_spec(), default_chain_spec()), strict=True)
+    )
     threads = numba.get_num_threads()
     numba.set_num_threads(1)
     try:
-        first = dem.simulate(chain, drives[:2], duration_s=1e-4, sample_rate_Hz=RATE_HZ)
-        n_sub = int(first.meta["substeps_per_sample"])
-        steps = n_sub * math.floor(duration_s * RATE_HZ + 1e-9)
-        fps = flops_per_step(*_kernel_counts(chain, n_sub), 1)
+        runs = []
+        for name, spec in specs.items():
+            chain = dem.build_chain(spec)
+            drives = _drives(chain, chain.delta0_m * np.geomspace(0.01, 4.0, batch // 2))
+            first = dem.simulate(chain, drives[:2], duration_s=1e-4, sample_rate_Hz=RATE_HZ)
+            n_sub = int(first.meta["substeps_per_sample"])
+            steps = n_sub * math.floor(duration_s * RATE_HZ + 1e-9)
+            runs.append(
+                (name, chain, drives, steps, flops_per_step(*_kernel_counts(chain, n_sub), 1))
+            )
         rows: list[dict[str, Any]] = []
         for r in range(rounds):
             peak = peak_flops(repeats=3)
-            t0 = time.perf_counter()
-            sweep(chain, drives, duration_s=duration_s, sample_rate_Hz=RATE_HZ)
-            wall = time.perf_counter() - t0
-            ns = wall / (steps * batch) * 1e9
-            floor_ns = fps / peak * 1e9
-            rows.append(
-                {
-                    "round": r + 1,
-                    "wall_s": wall,
-                    "ns_per_step_trajectory": ns,
-                    "peak_flops_per_s": peak,
-                    "floor_ns": floor_ns,
-                    "vs_flops_floor": ns / floor_ns,
-                }
-            )
+            for name, chain, drives, steps, fps in runs:
+                t0 = time.perf_counter()
+                sweep(chain, drives, duration_s=duration_s, sample_rate_Hz=RATE_HZ)
+                wall = time.perf_counter() - t0
+                ns = wall / (steps * batch) * 1e9
+                floor_ns = fps / peak * 1e9
+                rows.append(
+                    {
+                        "round": r + 1,
+                        "chain": name,
+                        "wall_s": wall,
+                        "ns_per_step_trajectory": ns,
+                        "peak_flops_per_s": peak,
+                        "floor_ns": floor_ns,
+                        "vs_flops_floor": ns / floor_ns,
+                    }
+                )
     finally:
         numba.set_num_threads(threads)
     return rows
@@ -348,21 +364,29 @@ def one_thread_rows(
 
 def _one_thread_summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
     """The rounds against the best peak of the run (the floor is what the machine can do, not
-    what it did in one moment): per row ``vs_flops_floor_best_peak``, and their best and median."""
+    what it did in one moment): per row ``vs_flops_floor_best_peak``, and per chain their best
+    and median; the keys without a chain's name are the benchmark chain's (the first of
+    :data:`ONE_THREAD_CHAINS`), those of the others carry it (``one_thread_dashpot_off_...``)."""
     best_peak = max(r["peak_flops_per_s"] for r in rows)
-    floor_best_ns = rows[0]["floor_ns"] * rows[0]["peak_flops_per_s"] / best_peak
-    for r in rows:
-        r["vs_flops_floor_best_peak"] = r["ns_per_step_trajectory"] / floor_best_ns
+    out: dict[str, Any] = {"one_thread_table": rows}
+    for i, name in enumerate(dict.fromkeys(r.get("chain", ONE_THREAD_CHAINS[0]) for r in rows)):
+        mine = [r for r in rows if r.get("chain", ONE_THREAD_CHAINS[0]) == name]
+        floor_best_ns = mine[0]["floor_ns"] * mine[0]["peak_flops_per_s"] / best_peak
+        for r in mine:
+            r["vs_flops_floor_best_peak"] = r["ns_per_step_trajectory"] / floor_best_ns
+        ns = [r["ns_per_step_trajectory"] for r in mine]
+        key = "one_thread" if i == 0 else "one_thread_" + name.replace(" ", "_").replace(".", "")
+        out.update(
+            {
+                f"{key}_ns_per_step_trajectory_best": min(ns),
+                f"{key}_ns_per_step_trajectory_median": float(np.median(ns)),
+                f"{key}_floor_ns_best_peak": floor_best_ns,
+                f"{key}_vs_flops_floor_best_peak_best": min(ns) / floor_best_ns,
+                f"{key}_vs_flops_floor_best_peak_median": float(np.median(ns)) / floor_best_ns,
+            }
+        )
     _print_table("the streaming sweep on one thread, in turns with the one-thread peak", rows)
-    ns = [r["ns_per_step_trajectory"] for r in rows]
-    return {
-        "one_thread_table": rows,
-        "one_thread_ns_per_step_trajectory_best": min(ns),
-        "one_thread_ns_per_step_trajectory_median": float(np.median(ns)),
-        "one_thread_floor_ns_best_peak": floor_best_ns,
-        "one_thread_vs_flops_floor_best_peak_best": min(ns) / floor_best_ns,
-        "one_thread_vs_flops_floor_best_peak_median": float(np.median(ns)) / floor_best_ns,
-    }
+    return out
 
 
 # --- streaming sweeps at growing batch sizes (issue 18) --------------------------------------
