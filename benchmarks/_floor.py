@@ -57,7 +57,7 @@ def kernel_ops(
 
     - ``pass1``, after every drift (m per step and one per sample): per cylinder the kick length
       x force (1 other); per mode the pending kick (1 fma), the 2x2 drift (2 fma, 2 other) and
-      the mode's share of u and u' (2 fma).
+      the mode's share of u (1 fma) and, with a dashpot, of u' (1 fma).
     - ``pass2``, every kick. A contact's force at a velocity, ``[fh (1 + chi d')]_+``, is one
       multiply-add and 2 other (the factor, the product, the max). The actuator (lane masks,
       drive force, the Hertz force with its overlap, the wall's work, the force at the start
@@ -78,7 +78,8 @@ def kernel_ops(
     N, K = n_cyl, n_block
     w = 1 if far_wall else 0
     drifts = n_kicks + 1.0 / n_sub
-    out = {"pass1": {"fma": 5 * N * K * drifts, "other": (2 * N * K + N) * drifts, "sqrt": 0.0}}
+    fma1 = (5 if dashpot else 4) * N * K * drifts
+    out = {"pass1": {"fma": fma1, "other": (2 * N * K + N) * drifts, "sqrt": 0.0}}
     other = 19 + 4 * (N - 1) + 6 * w
     fma = 1 + w
     if not dashpot:
@@ -108,11 +109,11 @@ def flops_per_step(
 ) -> float:
     """Floating-point operations of one step of one trajectory that the result needs: the
     operations of :func:`kernel_ops` (a multiply-add counts 2, a sqrt, max, add, subtract or
-    multiply 1) less u and u' after a sample's last drift (4 N K per sample), which the kernel
-    computes and does not use."""
+    multiply 1) less u and u' (with a dashpot) after a sample's last drift (2 N K flops per
+    sample each), which the kernel computes and does not use."""
     ops = kernel_ops(n_cyl, n_block, n_kicks, n_sub, dashpot, n_recorded, heun_kicks, far_wall)
     total = sum(2.0 * c["fma"] + c["other"] + c["sqrt"] for c in ops.values())
-    return total - 4.0 * n_cyl * n_block / n_sub
+    return total - (4.0 if dashpot else 2.0) * n_cyl * n_block / n_sub
 
 
 # --- measured rates -----------------------------------------------------------------------

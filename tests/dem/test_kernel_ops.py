@@ -193,11 +193,12 @@ def test_kernel_ops_count_what_the_kernel_executes(
 
 def test_flops_per_step_by_hand() -> None:
     """Two cylinders, one mode (the rigid one), one kick a step, one step a sample, undamped,
-    nothing recorded, far wall: pass 1 per drift 2 x (1 + 5 x 2 + 2) = 26 flops, two drifts
-    (the last one's u and u', 2 x 4 flops, not needed); pass 2: actuator 19 + 2 + 1, one
-    contact between the cylinders 4 + 1, the far wall 6 + 2 + 1, two forces on the cylinders:
-    38."""
-    assert flops_per_step(2, 1, 1, 1, False, 0) == 26 + (26 - 8) + 38
+    nothing recorded, far wall: pass 1 per drift 2 x (1 + 4 x 2 + 2) = 22 flops (no u' without
+    a dashpot), two drifts (the last one's u, 2 x 2 flops, not needed); pass 2: actuator 19 + 2
+    + 1, one contact between the cylinders 4 + 1, the far wall 6 + 2 + 1, two forces on the
+    cylinders: 38. With a dashpot pass 1 has u' too: 2 x (1 + 5 x 2 + 2) = 26 a drift."""
+    assert flops_per_step(2, 1, 1, 1, False, 0) == 22 + (22 - 4) + 38
+    assert kernel_ops(2, 1, 1, 1, True, 0)["pass1"]["fma"] == 2 * 2 * 5
     ops = kernel_ops(2, 1, 1, 1, False, 0)
     assert ops["pass2"] == {"fma": 2.0, "other": 31.0, "sqrt": 3.0}
     # the benchmark's sweep (31 cylinders, K = 4, 6 kicks, 2 steps a sample, damped, every
