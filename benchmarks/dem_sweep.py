@@ -38,7 +38,8 @@ default scheme with midpoint and with Heun kicks at 2 us to 0.125 us against yos
 The instruction floor by pass (:func:`floor_rows`): per step and trajectory of the streaming
 sweep, each pass's operations by class, its flops floor and its instruction floor with what
 bounds it, and the measured rates. The streaming sweep on one thread (:func:`one_thread_rows`):
-32 trajectories, in turns with the one-thread peak, against the flops floor of one thread.
+32 trajectories on the benchmark chain and on the default chain (dashpot off), in turns with
+the one-thread peak, against the flops floor of one thread.
 ``DEM_SWEEP_PARTS`` (comma list of ``batch``, ``floor``, ``one_thread``, ``scaling``,
 ``accuracy``; default all) picks the parts.
 """
