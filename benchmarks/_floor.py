@@ -237,10 +237,10 @@ def peak_flops(repeats: int = 5, n_iter: int = 4_000_000) -> float:
     ``vfmadd`` held in registers), a multiply-add counting 2 flops. On the AMD host this is 16
     flops a cycle, the core's rated double-precision peak (two four-lane multiply-add pipes).
 
-    It replaced a loop over a 64-double array that LLVM compiled to separate multiplies and adds
-    with ymm registers spilled to the stack: that kernel ran on four pipes (up to 18 flops a
-    cycle) and, the stack's alignment being drawn per process, read 20-59 Gflop/s from one
-    process to the next on one core (docs/performance.md, "The peak")."""
+    It replaced a loop over a 64-double array (``fastmath``) whose vectors did not fit the
+    registers and went to and from the stack: the stack's alignment being drawn per process, it
+    read 20-59 Gflop/s from one process to the next on one core, its best above the rated 16
+    flops a cycle (docs/performance.md, "The peak, measured again")."""
     n_par = numba.get_num_threads()
     return 2.0 * 10 * 4 * n_iter * n_par / _best_s(_vfma_kernel, n_iter, n_par, repeats)
 

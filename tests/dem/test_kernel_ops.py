@@ -263,9 +263,9 @@ def test_rate_kernels_issue_the_instructions_they_count(body: str, counts: dict[
 
 def test_peak_is_the_multiply_add_rate_kernel(monkeypatch: pytest.MonkeyPatch) -> None:
     """``peak_flops`` times the multiply-add rate kernel (10 four-lane ``vfmadd`` an iteration,
-    checked above; 2 flops each) on every thread. Its former kernel, a loop over an array,
-    compiled to multiplies and adds with vectors spilled to the stack, and read 20-59 Gflop/s
-    from one process to the next on one core."""
+    checked above; 2 flops each) on every thread. Its former kernel, a loop over an array whose
+    vectors went to and from the stack, read 20-59 Gflop/s from one process to the next on one
+    core."""
     import benchmarks._floor as floor
 
     timed: list[tuple[object, int, int]] = []
