@@ -36,3 +36,52 @@ def test_save_figure_lays_out_once_for_every_format(
     assert all(p.stat().st_size > 0 for p in paths)
     assert len(calls) == 1
     assert fig.get_layout_engine() is engine
+
+
+def _figure() -> Any:
+    with style():
+        fig, axes = new_figure(1, 2)
+        axes[0, 0].plot([0.0, 1.0, 4.0])
+        axes[0, 0].set_ylabel("velocity (m/s)")
+        axes[0, 1].imshow([[0.0, 1.0], [2.0, 3.0]])
+        axes[0, 1].set_title("a title that the layout has to make room for")
+    return fig
+
+
+def test_save_figure_draws_each_file_once(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """One draw per file: ``savefig`` draws a figure with a layout engine twice (a layout draw
+    with rendering off, then the rendering), four draws for the two formats before."""
+    from matplotlib.figure import Figure
+
+    draws = []
+    draw = Figure.draw
+
+    def counted(self: Figure, renderer: Any) -> Any:
+        draws.append(renderer)
+        return draw(self, renderer)
+
+    monkeypatch.setattr(Figure, "draw", counted)
+    fig = _figure()
+    canvas, dpi = fig.canvas, fig.dpi
+    save_figure(fig, tmp_path, "once")
+    assert len(draws) == len(FORMATS)
+    assert fig.canvas is canvas and fig.dpi == dpi
+
+
+def test_save_figure_writes_what_savefig_writes(tmp_path: Path) -> None:
+    """The PNG byte for byte as ``savefig`` at the style's dpi writes it; the PDF too, but for
+    its creation date."""
+    import re
+
+    from analysis.plots.style import RC
+
+    paths = save_figure(_figure(), tmp_path / "one_draw", "f")
+    with style():
+        ref = _figure()
+        ref.savefig(tmp_path / "f.png", dpi=RC["savefig.dpi"])
+        ref.set_layout_engine("none")  # as save_figure: the PDF keeps the PNG's layout
+        ref.savefig(tmp_path / "f.pdf", dpi=RC["savefig.dpi"])
+    png, pdf = (p.read_bytes() for p in paths)
+    assert png == (tmp_path / "f.png").read_bytes()
+    undated = re.compile(rb"/CreationDate \(D:[^)]*\)")
+    assert undated.sub(b"", pdf) == undated.sub(b"", (tmp_path / "f.pdf").read_bytes())
