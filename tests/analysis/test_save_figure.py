@@ -11,34 +11,8 @@ from matplotlib.layout_engine import ConstrainedLayoutEngine
 from analysis.plots.style import FORMATS, new_figure, save_figure, style
 
 
-def test_save_figure_lays_out_once_for_every_format(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    """The constrained layout runs once for the PNG and the PDF together (it ran once per
-    format before, about a fifth of ``biafc figures``), both files are written, and the
-    figure keeps its layout engine for whatever the caller does next."""
-    calls = []
-    execute = ConstrainedLayoutEngine.execute
-
-    def counted(self: ConstrainedLayoutEngine, fig: Any) -> Any:
-        calls.append(fig)
-        return execute(self, fig)
-
-    monkeypatch.setattr(ConstrainedLayoutEngine, "execute", counted)
-    with style():
-        fig, axes = new_figure(1, 2)
-        axes[0, 0].plot([0.0, 1.0, 4.0])
-        axes[0, 0].set_ylabel("velocity (m/s)")
-        axes[0, 1].set_title("a title that the layout has to make room for")
-    engine = fig.get_layout_engine()
-    paths = save_figure(fig, tmp_path, "one_layout")
-    assert [p.suffix for p in paths] == [f".{fmt}" for fmt in FORMATS]
-    assert all(p.stat().st_size > 0 for p in paths)
-    assert len(calls) == 1
-    assert fig.get_layout_engine() is engine
-
-
 def _figure() -> Any:
+    """Two axes, a label, an image and a title the constrained layout has to make room for."""
     with style():
         fig, axes = new_figure(1, 2)
         axes[0, 0].plot([0.0, 1.0, 4.0])
@@ -48,19 +22,41 @@ def _figure() -> Any:
     return fig
 
 
+def _counted(monkeypatch: pytest.MonkeyPatch, cls: type, name: str) -> list[Any]:
+    """The calls of method ``cls.name`` from now on (their second argument each)."""
+    calls: list[Any] = []
+    method = getattr(cls, name)
+
+    def counted(self: Any, arg: Any) -> Any:
+        calls.append(arg)
+        return method(self, arg)
+
+    monkeypatch.setattr(cls, name, counted)
+    return calls
+
+
+def test_save_figure_lays_out_once_for_every_format(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The constrained layout runs once for the PNG and the PDF together (it ran once per
+    format before, about a fifth of ``biafc figures``), both files are written, and the
+    figure keeps its layout engine for whatever the caller does next."""
+    calls = _counted(monkeypatch, ConstrainedLayoutEngine, "execute")
+    fig = _figure()
+    engine = fig.get_layout_engine()
+    paths = save_figure(fig, tmp_path, "one_layout")
+    assert [p.suffix for p in paths] == [f".{fmt}" for fmt in FORMATS]
+    assert all(p.stat().st_size > 0 for p in paths)
+    assert len(calls) == 1
+    assert fig.get_layout_engine() is engine
+
+
 def test_save_figure_draws_each_file_once(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """One draw per file: ``savefig`` draws a figure with a layout engine twice (a layout draw
     with rendering off, then the rendering), four draws for the two formats before."""
     from matplotlib.figure import Figure
 
-    draws = []
-    draw = Figure.draw
-
-    def counted(self: Figure, renderer: Any) -> Any:
-        draws.append(renderer)
-        return draw(self, renderer)
-
-    monkeypatch.setattr(Figure, "draw", counted)
+    draws = _counted(monkeypatch, Figure, "draw")
     fig = _figure()
     canvas, dpi = fig.canvas, fig.dpi
     save_figure(fig, tmp_path, "once")
