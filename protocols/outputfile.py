@@ -11,10 +11,14 @@ that wait twice; :func:`read_output` pays it once.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from protocols.runfile import RunData, one_line_errors, open_for_reading, read_open_run
-from protocols.studyfile import FORMAT as STUDY_FORMAT
-from protocols.studyfile import StudyData, StudyFileError, read_open_study
+from protocols.studyformat import FORMAT as STUDY_FORMAT
+from protocols.studyformat import StudyFileError
+
+if TYPE_CHECKING:
+    from protocols.studyfile import StudyData
 
 __all__ = ["read_output"]
 
@@ -31,5 +35,7 @@ def read_output(path: str | Path, *, spectra: bool = True) -> RunData | StudyDat
         raise FileNotFoundError(f"run file {path} does not exist")
     with one_line_errors(path, passing=(StudyFileError,)), open_for_reading(path) as f:
         if f.attrs.get("format") == STUDY_FORMAT:
+            from protocols.studyfile import read_open_study  # the study schema: studies only
+
             return read_open_study(path, f, spectra=spectra)
         return read_open_run(path, f)

@@ -43,6 +43,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from protocols.study import METRICS, PARAMETERS, CellTable
+from protocols.studyformat import FORMAT, FORMAT_VERSION, StudyFileError
 
 __all__ = [
     "FORMAT",
@@ -53,13 +54,6 @@ __all__ = [
     "read_open_study",
     "read_study",
 ]
-
-FORMAT = "biafc-study"
-FORMAT_VERSION = 1
-
-
-class StudyFileError(ValueError):
-    """A study output that cannot be used (one line: the file and why)."""
 
 
 def _unit(name: str) -> str:

@@ -139,7 +139,8 @@ def run(args: argparse.Namespace) -> int:
             raise CliError(f"--{name} applies only with --alpha-sweep")
     path: Path = args.run_file
     from daq.cli.run_input import read_run_or_study
-    from protocols.studyfile import StudyData, StudyFileError
+    from protocols.runfile import RunData
+    from protocols.studyformat import StudyFileError
 
     try:  # one open of the file, before matplotlib is imported: a refusal comes at once
         data = read_run_or_study(path)
@@ -148,7 +149,7 @@ def run(args: argparse.Namespace) -> int:
     except CliError:
         _refuse_study_options(args)  # named first, as for any file that is no study output
         raise
-    if isinstance(data, StudyData):
+    if not isinstance(data, RunData):  # a study output (its schema imported only for one)
         return _study_figures(args, path, data)
     _refuse_study_options(args)
     from analysis.report import write_figures

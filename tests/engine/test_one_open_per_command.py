@@ -156,3 +156,23 @@ def test_study_options_on_a_damaged_run_file_are_still_named_first(
     path.write_bytes(files["killed"][:1024])
     assert biafc(["figures", str(path), "--x", "diameter"]) == 2
     assert capsys.readouterr().err.strip().endswith("--x applies only to a study output")
+
+
+def test_a_run_file_is_told_from_a_study_without_the_study_schema(
+    files: dict[str, bytes], tmp_path: Path
+) -> None:
+    """``read_output`` tells a study output by its root's ``format``; a run file is read without
+    importing the study schema (``protocols.study``, pydantic: 0.15-0.18 s of every ``biafc
+    figures`` of a run file, imported at the top of ``protocols.outputfile`` before)."""
+    import subprocess
+    import sys
+
+    path = tmp_path / "good.h5"
+    path.write_bytes(files["good"])
+    code = (
+        "import sys; import daq.cli.figures; from protocols.outputfile import read_output; "
+        f"d = read_output({str(path)!r}); assert type(d).__name__ == 'RunData', type(d); "
+        "assert 'protocols.study' not in sys.modules, 'the study schema was imported'"
+    )
+    root = Path(__file__).resolve().parents[2]
+    subprocess.run([sys.executable, "-c", code], check=True, cwd=root)
