@@ -171,20 +171,21 @@ def floor_rows() -> tuple[list[dict[str, Any]], dict[str, float]]:
     (``benchmarks._floor.kernel_ops``), flops, the time of those flops at the measured peak and
     the instruction floor with its bound (the square-root unit or the ports); the last row sums
     them. Also returns the measured rates (``benchmarks._floor.instruction_rates``) and the
-    peak (``peak_flops``, flop/s)."""
-    from benchmarks._floor import instruction_floor, instruction_rates, kernel_ops, peak_flops
+    peak (``peak_flops``, flop/s: twice the multiply-add rate, which ``peak_flops`` times with
+    the same kernel)."""
+    from benchmarks._floor import instruction_floor, instruction_rates, kernel_ops, unneeded_flops
 
     chain = dem.build_chain(benchmark_chain_spec())
     drives = _drives(chain, np.array([chain.delta0_m]))
     res = dem.simulate(chain, drives, duration_s=1e-4, sample_rate_Hz=RATE_HZ)  # warm-up
     n_sub = int(res.meta["substeps_per_sample"])
-    ops = kernel_ops(*_kernel_counts(chain, n_sub), 1)
-    peak = peak_flops(repeats=3)
+    n_cyl, n_block, _, _, dashpot = counts = _kernel_counts(chain, n_sub)
+    ops = kernel_ops(*counts, 1)
     rates = instruction_rates(repeats=3)
-    rates["peak_flops"] = peak
+    peak = rates["peak_flops"] = 2.0 * rates["fma"]
     floor = instruction_floor(ops, rates, lane_steps=1.0)
-    # the last drift's unneeded u and u' (kernel_ops counts them, the flops do not)
-    unneeded = {"pass1": 4.0 * chain.n * (chain.n_modes + 1) / n_sub}
+    # the last drift's unneeded u (and u') (kernel_ops counts them, the flops do not)
+    unneeded = {"pass1": unneeded_flops(n_cyl, n_block, n_sub, dashpot)}
     rows: list[dict[str, Any]] = []
     for name, c in ops.items():
         flops = 2.0 * c["fma"] + c["other"] + c["sqrt"] - unneeded.get(name, 0.0)
@@ -370,8 +371,8 @@ def _one_thread_summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
     :data:`ONE_THREAD_CHAINS`), those of the others carry it (``one_thread_dashpot_off_...``)."""
     best_peak = max(r["peak_flops_per_s"] for r in rows)
     out: dict[str, Any] = {"one_thread_table": rows}
-    for i, name in enumerate(dict.fromkeys(r.get("chain", ONE_THREAD_CHAINS[0]) for r in rows)):
-        mine = [r for r in rows if r.get("chain", ONE_THREAD_CHAINS[0]) == name]
+    for i, name in enumerate(dict.fromkeys(r["chain"] for r in rows)):
+        mine = [r for r in rows if r["chain"] == name]
         floor_best_ns = mine[0]["floor_ns"] * mine[0]["peak_flops_per_s"] / best_peak
         for r in mine:
             r["vs_flops_floor_best_peak"] = r["ns_per_step_trajectory"] / floor_best_ns
