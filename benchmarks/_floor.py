@@ -32,7 +32,10 @@ from typing import Any
 import numba
 import numpy as np
 
+from sim_backend.dem.kernel_cache import install_cache_locator
 from sim_backend.dem.simd import vfma, vlane, vmax, vsplat, vsqrt
+
+install_cache_locator()  # before the decorators below: compiled code to the user's cache folder
 
 #: operation classes of :func:`kernel_ops`
 OP_CLASSES = ("fma", "other", "sqrt")

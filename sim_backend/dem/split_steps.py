@@ -31,6 +31,10 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
+from sim_backend.dem.kernel_cache import install_cache_locator
+
+install_cache_locator()  # before the decorators below: compiled code to the user's cache folder
+
 __all__ = [
     "BREAK_TOL",
     "drift_into",

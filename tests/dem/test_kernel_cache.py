@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import io
+import json
+import os
+import re
 import subprocess
 import sys
 import time
@@ -18,8 +21,6 @@ PROBE = "from sim_backend.dem import kernel; print(kernel.run_chunks._cache._cac
 
 
 def _cache_path(env_dir: str) -> Path:
-    import os
-
     env = {k: v for k, v in os.environ.items() if not k.startswith("NUMBA_CACHE")}
     env["BIAFC_CACHE_DIR"] = env_dir
     out = subprocess.run([sys.executable, "-c", PROBE], env=env, cwd=ROOT, capture_output=True,
@@ -31,6 +32,50 @@ def test_compiled_kernel_lives_in_the_user_cache_folder_not_the_sources(tmp_path
     path = _cache_path(str(tmp_path / "cache"))
     assert path.is_relative_to((tmp_path / "cache" / "numba").resolve())
     assert not path.is_relative_to(ROOT)
+
+
+#: prints {module.function: cache folder} of every cached numba function of the modules named
+CACHE_FOLDERS = """
+import importlib, json, sys
+from numba.core.registry import CPUDispatcher
+out = {}
+for name in sys.argv[1:]:
+    for key, obj in vars(importlib.import_module(name)).items():
+        folder = getattr(getattr(obj, "_cache", None), "_cache_path", None)
+        if isinstance(obj, CPUDispatcher) and obj.py_func.__module__ == name and folder:
+            out[name + "." + key] = folder
+print(json.dumps(out))
+"""
+
+
+def _modules_with_cached_functions() -> list[str]:
+    """Every module of the project (sources, benchmarks, tests) that declares a numba function
+    with ``cache=True``, found in the sources."""
+    declares = re.compile(r"@numba\.njit\([^)]*cache=True")
+    found = []
+    for package in ("sim_backend", "benchmarks", "analysis", "daq", "instruments", "protocols",
+                    "tests"):  # fmt: skip
+        for path in sorted((ROOT / package).rglob("*.py")):
+            if declares.search(path.read_text(encoding="utf-8")):
+                found.append(".".join(path.relative_to(ROOT).with_suffix("").parts))
+    return found
+
+
+def test_every_cached_numba_function_compiles_into_the_user_cache_folder(tmp_path: Path) -> None:
+    """Not only the kernel: a module whose functions numba decorates before the locator is
+    installed caches next to its sources, and a read-only install whose home cache cannot be
+    written fails on its first run ("cannot cache function 'drift_into': no locator available")."""
+    modules = _modules_with_cached_functions()
+    assert {"sim_backend.dem.kernel", "sim_backend.dem.split_steps"} <= set(modules)
+    env = {k: v for k, v in os.environ.items() if not k.startswith("NUMBA_CACHE")}
+    env["BIAFC_CACHE_DIR"] = str(tmp_path / "cache")
+    out = subprocess.run([sys.executable, "-c", CACHE_FOLDERS, *modules], env=env, cwd=ROOT,
+                         capture_output=True, text=True, check=True, timeout=300)  # fmt: skip
+    folders = json.loads(out.stdout.strip().splitlines()[-1])
+    assert {name.rsplit(".", 1)[0] for name in folders} == set(modules)
+    user = (tmp_path / "cache" / "numba").resolve()
+    elsewhere = {n: f for n, f in folders.items() if not Path(f).resolve().is_relative_to(user)}
+    assert not elsewhere, f"cached outside {user}: {elsewhere}"
 
 
 def test_unwritable_cache_folder_falls_back_without_failing(tmp_path: Path) -> None:

@@ -10,7 +10,10 @@ from numba.core.errors import TypingError
 
 from instruments.burst import Burst
 from sim_backend import dem
+from sim_backend.dem.kernel_cache import install_cache_locator
 from sim_backend.dem.simd import vbcast, vfma, vlane, vload, vmax, vsplat, vsqrt, vstore
+
+install_cache_locator()  # before the decorators below: compiled code to the user's cache folder
 
 
 @numba.njit(cache=True)
