@@ -6,7 +6,9 @@ editable install, in a possibly read-only site-packages otherwise); here it goes
 cache folder, ``<cache_dir>/numba`` (:func:`instruments.user_cache.cache_dir`: platformdirs'
 user cache folder of biafc-lab, or ``$BIAFC_CACHE_DIR``), for the project's own files only.
 ``$NUMBA_CACHE_DIR`` or ``$NUMBA_CACHE_LOCATOR_CLASSES``, when set, win; a cache folder that
-cannot be written falls back to numba's own choice.
+cannot be written falls back to numba's own choice. numba picks a function's cache folder when it
+decorates it, so every module with a cached function calls :func:`install_cache_locator` before
+its decorators (``tests/dem/test_kernel_cache.py`` checks them all).
 
 While the first call of a process compiles (or loads) the kernel, :func:`compile_notice` tells
 the reporter set by :func:`set_compile_reporter` (the command-line tools print one line, and the
