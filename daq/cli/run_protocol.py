@@ -208,8 +208,12 @@ class _SignalGate:
     def _force(self) -> None:
         self._forced = True
         main = threading.main_thread().ident
-        if main is not None:  # a real signal: it also breaks a blocking wait of the main thread
+        if main is None:
+            return
+        if hasattr(signal, "pthread_kill"):  # a real signal: it breaks a blocking wait there too
             signal.pthread_kill(main, signal.SIGINT)
+        else:  # Windows: raised in the process, whose SIGINT event also ends a wait
+            signal.raise_signal(signal.SIGINT)
 
     def __call__(self, signum: int, frame: FrameType | None) -> None:
         name = signal.Signals(signum).name

@@ -12,9 +12,10 @@ if the name exists, so exactly one writer wins) and removed. A lock file therefo
 without its content, whatever moment a writer is killed or preempted at. (On a file system
 without hard links the lock is created with ``O_CREAT | O_EXCL`` and then written, as before.)
 
-A lock left by a process that no longer runs on this host (killed, crashed) is stale and taken
-over; a lock from another host is never taken over (its process cannot be checked from here):
-the message says which file to delete once that run is known to be over. A takeover holds an
+A lock left by a process that no longer runs on this host (killed, crashed; asked without
+signalling it, :mod:`daq.store.process_check`) is stale and taken over; a lock from another
+host is never taken over (its process cannot be checked from here): the message says which
+file to delete once that run is known to be over. A takeover holds an
 ``flock`` on the stale lock file itself while it checks that the name still points to that
 file, reads it again and removes it, so two processes taking over the same stale lock at once
 cannot both win (the second finds the name now points elsewhere and looks again). An empty or
@@ -31,6 +32,8 @@ import sys
 import time
 from pathlib import Path
 from typing import Any
+
+from daq.store.process_check import process_alive, process_start
 
 try:
     import fcntl
@@ -60,26 +63,6 @@ class FileInUse(RuntimeError):
 def lock_path(path: str | Path) -> Path:
     p = Path(path)
     return p.with_name(p.name + ".lock")
-
-
-def _start_time(pid: int) -> str | None:
-    """The process's start time in clock ticks since boot (Linux ``/proc``), else ``None``."""
-    try:
-        stat = Path(f"/proc/{pid}/stat").read_text()
-    except OSError:
-        return None
-    return stat.rsplit(")", 1)[1].split()[19]
-
-
-def _alive(pid: int, started: str | None) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True  # exists, owned by someone else
-    now = _start_time(pid)
-    return started is None or now is None or now == started  # else: the PID was reused
 
 
 def read_lock(path: str | Path) -> dict[str, Any] | None:
@@ -116,7 +99,7 @@ class RunFileLock:
         return {
             "host": socket.gethostname(),
             "pid": os.getpid(),
-            "process_start": _start_time(os.getpid()),
+            "process_start": process_start(os.getpid()),
             "since": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
             "command": " ".join(sys.argv)[:500],
         }
@@ -177,7 +160,7 @@ class RunFileLock:
                 pid = int(tmp.name[len(self.lock.name) + 2 :].split("-", 1)[0])
             except ValueError:
                 continue
-            if pid != os.getpid() and not _alive(pid, None):
+            if pid != os.getpid() and not process_alive(pid, None):
                 tmp.unlink(missing_ok=True)
 
     def _look(self) -> tuple[dict[str, Any] | None, float | None]:
@@ -248,7 +231,7 @@ class RunFileLock:
             return True
         if pid == os.getpid():
             return False
-        return not _alive(pid, other.get("process_start"))
+        return not process_alive(pid, other.get("process_start"))
 
     def _in_use(self, other: dict[str, Any]) -> str:
         where = other.get("host", "?")

@@ -21,7 +21,8 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from daq.store.lock import RunFileLock, _alive
+from daq.store.lock import RunFileLock
+from daq.store.process_check import process_alive
 from daq.store.run_store import StoreError
 from protocols.outputfile import read_output
 from protocols.recover import clear_consistency_flags, has_consistency_flags
@@ -73,7 +74,7 @@ def _leftovers(path: Path) -> list[Path]:
             pid = int(part.name[len(path.name) + 2 : -len(".part")])
         except ValueError:
             continue
-        if not _alive(pid, None):
+        if not process_alive(pid, None):
             out.append(part)
     return out
 
