@@ -12,6 +12,8 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from types import SimpleNamespace
+from typing import Any
 
 import pytest
 
@@ -99,6 +101,58 @@ def test_no_pid_names_no_process() -> None:
     """On POSIX ``os.kill(0, 0)`` and ``os.kill(-1, 0)`` address process groups, and succeed."""
     assert not process_check.process_alive(0, None)
     assert not process_check.process_alive(-1, None)
+
+
+def _kernel32() -> SimpleNamespace:
+    """The four kernel32 calls as Microsoft documents them: ``OpenProcess`` returns 0 and sets
+    the last error (87 no such process, 5 access denied); ``GetExitCodeProcess`` gives 259
+    (STILL_ACTIVE) while the process runs; ``GetProcessTimes`` its creation FILETIME. Plain
+    functions, which take the ``restype`` and ``argtypes`` the caller sets."""
+    k = SimpleNamespace(error=0, open=set())
+    procs = {10: (259, 0x01DB, 0x2345), 11: (0, 1, 2)}  # pid: exit code, creation high, low
+
+    def open_process(access: int, inherit: bool, pid: int) -> int:
+        assert access == 0x1000  # PROCESS_QUERY_LIMITED_INFORMATION: enough, for any user
+        if pid == 12:
+            k.error = 5
+            return 0
+        if pid not in procs:
+            k.error = 87
+            return 0
+        k.open.add(1000 + pid)
+        return 1000 + pid
+
+    def exit_code(handle: int, code: Any) -> int:
+        code._obj.value = procs[handle - 1000][0]
+        return 1
+
+    def times(handle: int, created: Any, *others: Any) -> int:
+        created._obj.dwHighDateTime, created._obj.dwLowDateTime = procs[handle - 1000][1:]
+        return 1
+
+    def close(handle: int) -> int:
+        k.open.remove(handle)
+        return 1
+
+    k.OpenProcess, k.GetExitCodeProcess, k.GetProcessTimes, k.CloseHandle = (
+        open_process, exit_code, times, close,
+    )  # fmt: skip
+    return k
+
+
+def test_the_win32_query_reads_running_ended_missing_and_foreign_processes(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    import ctypes
+
+    k32 = _kernel32()
+    monkeypatch.setattr(ctypes, "WinDLL", lambda name, use_last_error: k32, raising=False)
+    monkeypatch.setattr(ctypes, "get_last_error", lambda: k32.error, raising=False)
+    assert process_check._win32_process(10) == (True, str((0x01DB << 32) | 0x2345))
+    assert process_check._win32_process(11) == (False, None)  # ended, a handle still open
+    assert process_check._win32_process(13) == (False, None)  # no such process
+    assert process_check._win32_process(12) == (True, None)  # another user's
+    assert k32.open == set()  # every handle closed
 
 
 @pytest.mark.skipif(sys.platform != "win32", reason="the Win32 process query runs on Windows only")
