@@ -1,10 +1,11 @@
 """Console-script entry points that are quiet about Ctrl-C from their first instruction.
 
-``run_protocol`` (the console script) imports this module first: a SIGINT/SIGTERM while the
-interpreter is still importing the program (before ``run_protocol.main`` installs its own
-handling) ends it with one line and exit status 130 (143 for SIGTERM), not a
-``KeyboardInterrupt`` traceback. Nothing has been opened or written at that point. Only console
-scripts import this module: importing it installs the handler (its one job).
+``run_protocol`` (the console script) imports this module first: a SIGINT/SIGTERM (or SIGHUP,
+unless ignored as under ``nohup``) while the interpreter is still importing the program (before
+``run_protocol.main`` installs its own handling) ends it with one line and exit status 130 (128
++ the signal's number for the others), not a ``KeyboardInterrupt`` traceback. Nothing has been
+opened or written at that point. Only console scripts import this module: importing it
+installs the handler (its one job).
 """
 
 from __future__ import annotations
@@ -21,15 +22,21 @@ _PROG = "run_protocol"
 
 def _before_start(signum: int, frame: FrameType | None) -> None:
     name = signal.Signals(signum).name
-    os.write(
-        2,
-        f"{_PROG}: interrupted by {name} before the run started: nothing was switched on, "
-        "no file written\n".encode(),
-    )
+    try:
+        os.write(
+            2,
+            f"{_PROG}: interrupted by {name} before the run started: nothing was switched on, "
+            "no file written\n".encode(),
+        )
+    except OSError:  # SIGHUP: the terminal is gone
+        pass
     os._exit(130 if signum == signal.SIGINT else 128 + signum)
 
 
-for _sig in (signal.SIGINT, signal.SIGTERM):
+_SIGNALS = [signal.SIGINT, signal.SIGTERM]
+if hasattr(signal, "SIGHUP") and signal.getsignal(signal.SIGHUP) is not signal.SIG_IGN:
+    _SIGNALS.append(signal.SIGHUP)  # the terminal closed; ignored under nohup: left so
+for _sig in _SIGNALS:
     signal.signal(_sig, _before_start)
 
 
@@ -43,8 +50,8 @@ def run_protocol() -> int:
     try:
         return main()
     finally:
-        signal.signal(signal.SIGINT, signal.SIG_IGN)  # the outcome is decided: keep its status
-        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        for sig in _SIGNALS:  # the outcome is decided: keep its status
+            signal.signal(sig, signal.SIG_IGN)
         settle()
 
 

@@ -22,6 +22,7 @@ time it took is shown.
 from __future__ import annotations
 
 import argparse
+import os
 import signal
 import sys
 import threading
@@ -181,11 +182,38 @@ class _Interrupted(KeyboardInterrupt):
 ABORT_BOUND_S = 5.0
 
 
+def stop_signals() -> tuple[int, ...]:
+    """The signals that stop a run: SIGINT, SIGTERM and, where there is one and it is not
+    ignored, SIGHUP (the terminal closed, or the ssh link to it dropped). Under ``nohup``
+    SIGHUP is ignored: the run goes on, as ``nohup`` promises."""
+    hup: int | None = getattr(signal, "SIGHUP", None)
+    if hup is None or signal.getsignal(hup) is signal.SIG_IGN:
+        return (signal.SIGINT, signal.SIGTERM)
+    return (signal.SIGINT, signal.SIGTERM, hup)
+
+
+def _leave_the_terminal() -> None:
+    """After SIGHUP: the terminal is gone, and a write to it could fail or block the abort. The
+    standard output and error go to the null device from here on; the run's log file
+    (``RUN.log``) and the run file keep the outcome."""
+    try:
+        sys.stdout.flush()
+    except (OSError, ValueError):
+        pass
+    null = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(null, 1)
+        os.dup2(null, 2)
+    finally:
+        os.close(null)
+
+
 class _SignalGate:
-    """SIGINT/SIGTERM from the first moment of ``main``: before the engine exists a signal
-    stops at once (nothing was switched on); during the run the first asks the engine to abort
-    and starts a watchdog of :data:`ABORT_BOUND_S`; a second one, or the watchdog, interrupts
-    whatever runs. Never while the safe state is being set and the file closed."""
+    """SIGINT/SIGTERM (and SIGHUP, :func:`stop_signals`) from the first moment of ``main``:
+    before the engine exists a signal stops at once (nothing was switched on); during the run
+    the first asks the engine to abort and starts a watchdog of :data:`ABORT_BOUND_S`; a second
+    one, or the watchdog, interrupts whatever runs. Never while the safe state is being set and
+    the file closed."""
 
     def __init__(self) -> None:
         self.engine: Any = None
@@ -195,7 +223,7 @@ class _SignalGate:
         self._old: dict[int, Any] = {}
 
     def install(self) -> _SignalGate:
-        self._old = {s: signal.signal(s, self) for s in (signal.SIGINT, signal.SIGTERM)}
+        self._old = {s: signal.signal(s, self) for s in stop_signals()}
         return self
 
     def restore(self) -> None:
@@ -217,6 +245,8 @@ class _SignalGate:
 
     def __call__(self, signum: int, frame: FrameType | None) -> None:
         name = signal.Signals(signum).name
+        if name == "SIGHUP":
+            _leave_the_terminal()
         if self._forced:
             self._forced = False
             name = self.interrupted[0] if self.interrupted else name
@@ -304,7 +334,10 @@ def _execute(
         logging.INFO if code == ExitCode.COMPLETE else logging.ERROR, "%s (exit %d)", line, code
     )
     detach(log_file)
-    print(line, file=sys.stdout if code == ExitCode.COMPLETE else sys.stderr, flush=True)
+    try:
+        print(line, file=sys.stdout if code == ExitCode.COMPLETE else sys.stderr, flush=True)
+    except OSError:  # the terminal is gone (SIGHUP ignored): the log file has the line
+        _leave_the_terminal()
     return int(code)
 
 

@@ -1,6 +1,7 @@
 """``python -m engine.fake_cli ARGS...`` (from tests/): run_protocol with the bench replaced by
 the fake instruments (slow reads), for the SIGKILL / SIGINT subprocess tests. Prints the fake
-generator's output states as ``OUTPUTS {...}`` when the run returns. ``FAKE_CONNECT_S``: seconds
+generator's output states as ``OUTPUTS {...}`` when the run returns (and writes them to the
+file ``FAKE_OUTPUTS_FILE`` names, for a run whose terminal is gone). ``FAKE_CONNECT_S``: seconds
 the bench assembly takes (to interrupt it); ``FAKE_ABORT_BOUND_S``: the bound on an abort."""
 
 from __future__ import annotations
@@ -31,5 +32,8 @@ rp.ABORT_BOUND_S = float(os.environ.get("FAKE_ABORT_BOUND_S", rp.ABORT_BOUND_S))
 
 if __name__ == "__main__":
     code = rp.main(sys.argv[1:])
+    if os.environ.get("FAKE_OUTPUTS_FILE"):
+        with open(os.environ["FAKE_OUTPUTS_FILE"], "w", encoding="utf-8") as f:
+            f.write(f"OUTPUTS {WORLD.outputs}\n")
     print(f"OUTPUTS {WORLD.outputs}", flush=True)
     sys.exit(code)

@@ -199,6 +199,86 @@ def test_sigterm_aborts_safely(proto_file, tmp_path) -> None:
     assert read_run(out).status == "aborted"
 
 
+def _run_in_a_terminal(args: list[str], outputs: Path, *, nohup: bool) -> tuple[int, float]:
+    """Run the fake ``run_protocol`` on a pseudo-terminal, close the terminal once a point is
+    measured (as a closed window or a dropped ssh link does: the kernel sends SIGHUP), and
+    return its exit status and the seconds it took after the hangup. ``nohup``: SIGHUP ignored,
+    as ``nohup`` starts it."""
+    import pty
+    import threading
+
+    env = dict(os.environ, FAKE_READ_S="0.05", PYTHONPATH=str(TESTS))
+    env["FAKE_OUTPUTS_FILE"] = str(outputs)
+    pid, fd = pty.fork()
+    if pid == 0:  # the child: its session's controlling terminal is the pty
+        try:
+            os.chdir(TESTS)
+            if nohup:  # as nohup does: SIGHUP ignored, the output to nohup.out
+                signal.signal(signal.SIGHUP, signal.SIG_IGN)
+                log = os.open(outputs.with_name("nohup.out"), os.O_WRONLY | os.O_CREAT, 0o644)
+                os.dup2(log, 1)
+                os.dup2(log, 2)
+            os.execve(sys.executable, [sys.executable, "-m", "engine.fake_cli", *args], env)
+        finally:
+            os._exit(127)
+
+    def drain() -> None:  # the terminal shows what the run writes
+        try:
+            while os.read(fd, 4096):
+                pass
+        except OSError:
+            pass
+
+    threading.Thread(target=drain, daemon=True).start()
+    out = Path(args[args.index("--out") + 1])
+    t_end = time.monotonic() + 60
+    while time.monotonic() < t_end:
+        try:
+            with open_swmr(out) as f:
+                if int(np.sum(f["scan/ltr/done"][...] == PointState.DONE)) >= 1:
+                    break
+        except (OSError, KeyError):
+            pass
+        time.sleep(0.05)
+    os.close(fd)  # the terminal goes away
+    hung_up = time.monotonic()
+    while time.monotonic() < hung_up + 60:
+        done, status = os.waitpid(pid, os.WNOHANG)
+        if done:
+            return os.waitstatus_to_exitcode(status), time.monotonic() - hung_up
+        time.sleep(0.05)
+    os.kill(pid, signal.SIGKILL)
+    os.waitpid(pid, 0)
+    raise AssertionError("run_protocol did not end after its terminal closed")
+
+
+@pytest.mark.skipif(not hasattr(signal, "SIGHUP"), reason="no terminal hangup on this platform")
+def test_a_closed_terminal_aborts_safely(proto_file, tmp_path) -> None:
+    """Before, SIGHUP killed the process where it stood: the generator's outputs left on, the
+    file 'running' with its lock, the log cut off."""
+    out, outputs = tmp_path / "hup.h5", tmp_path / "outputs.txt"
+    code, after_s = _run_in_a_terminal([str(proto_file), "--out", str(out)], outputs, nohup=False)
+    assert code == 1  # aborted, safe state confirmed (3 if unconfirmed)
+    assert outputs.read_text() == "OUTPUTS {1: False, 2: False}\n"
+    run = read_run(out)
+    assert run.status == "aborted"
+    assert any("interrupted by SIGHUP" in m for _, _, m in run.log)
+    log = out.with_suffix(".log").read_text(encoding="utf-8")
+    assert "run aborted: interrupted by SIGHUP" in log and "safe state confirmed" in log
+    assert not (tmp_path / "hup.h5.lock").exists()
+    assert after_s < 10
+
+
+@pytest.mark.skipif(not hasattr(signal, "SIGHUP"), reason="no terminal hangup on this platform")
+def test_under_nohup_a_closed_terminal_lets_the_run_finish(proto_file, tmp_path) -> None:
+    out, outputs = tmp_path / "nohup.h5", tmp_path / "outputs.txt"
+    code, _ = _run_in_a_terminal([str(proto_file), "--out", str(out)], outputs, nohup=True)
+    assert code == 0
+    assert outputs.read_text() == "OUTPUTS {1: False, 2: False}\n"
+    assert read_run(out).status == "complete"
+    assert "complete: " in (tmp_path / "nohup.out").read_text(encoding="utf-8")
+
+
 def test_lookup3_matches_hdf5_superblock_checksum(tmp_path: Path) -> None:
     import struct
 
