@@ -98,8 +98,10 @@ def validate_request(
     from daq.engine import make_plan
     from daq.store import StoreError, check_output_path, check_resume, stored_request
     from daq.store import stored_seed as _stored_seed
+    from daq.store.disk_space import shortfall
     from daq.store.lock import in_use_by
     from protocols.bench import load_bench
+    from protocols.runfile import pending_points
     from protocols.schema import load_protocol, shipped_protocols
     from protocols.yamlfile import ConfigError
 
@@ -152,6 +154,10 @@ def validate_request(
             busy = in_use_by(target)
             if busy is not None:
                 raise RequestError(busy)
+            n_todo = pending_points(resume) if resume is not None else plan.n_points
+            short = shortfall(target, n_todo, pf.protocol.acquisition.n_samples())
+            if short is not None:
+                raise RequestError(short)
         if seed is None and resume is not None and check_output:
             seed = _stored_seed(resume)
         if seed is None and bf.bench.simulation is not None:

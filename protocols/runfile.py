@@ -82,6 +82,7 @@ __all__ = [
     "ScanSpec",
     "one_line_errors",
     "open_for_reading",
+    "pending_points",
     "read_open_run",
     "read_run",
     "software_version",
@@ -220,6 +221,14 @@ class RunFileWriter:
         self.path = path
         self._f = handle
         self._closed = False
+        #: why the file took no more writes (a records write failed), else ``None``: the
+        #: writer then leaves the file alone, as a killed writer would (HDF5 crashed the
+        #: process closing a file after a failed write on a full disk)
+        self.broken: str | None = None
+
+    def _check_usable(self) -> None:
+        if self.broken is not None:
+            raise RunFileError(self.broken)
 
     # -- creation -------------------------------------------------------------------------
     @classmethod
@@ -371,10 +380,28 @@ class RunFileWriter:
         drive: NDArray[np.floating[Any]],
         measured_at: float | None = None,
     ) -> None:
-        """Store one point (0-based indices), mark it done and flush. Shapes ``[S]``."""
+        """Store one point (0-based indices), mark it done and flush. Shapes ``[S]``.
+
+        The records are flushed before the point is marked done: HDF5 writes a chunk when it
+        leaves the chunk cache, and a write that fails there (a full disk) is reported nowhere
+        a caller could see. A records write that fails raises :class:`RunFileError` (one line)
+        and the point stays pending."""
+        self._check_usable()
         g = self._f["scan"][direction]
-        g["velocity"][amplitude_index, cylinder_index, :] = np.asarray(velocity, np.float32)
-        g["drive"][amplitude_index, cylinder_index, :] = np.asarray(drive, np.float32)
+        try:
+            for name, values in (("velocity", velocity), ("drive", drive)):
+                ds = g[name]
+                ds[amplitude_index, cylinder_index, :] = np.asarray(values, np.float32)
+                ds.flush()
+        except (OSError, RuntimeError) as exc:
+            why = (str(exc).strip("'\"").splitlines() or [type(exc).__name__])[0]
+            self.broken = (
+                f"{self.path}: the records of point {direction} amplitude #{amplitude_index + 1} "
+                f"cylinder #{cylinder_index + 1} could not be written ({why}): the file is left "
+                f"as a killed writer's; free some space, then biafc repair {self.path} and "
+                f"run_protocol --resume {self.path}"
+            )
+            raise RunFileError(self.broken) from None
         g["measured_at"][amplitude_index, cylinder_index] = (
             time.time() if measured_at is None else measured_at
         )
@@ -383,6 +410,7 @@ class RunFileWriter:
 
     def mark_failed(self, direction: str, amplitude_index: int, cylinder_index: int) -> None:
         """Mark a point that failed after its retries (``done`` = 2) and flush."""
+        self._check_usable()
         self._f["scan"][direction]["done"][amplitude_index, cylinder_index] = PointState.FAILED
         self._f.flush()
 
@@ -399,6 +427,7 @@ class RunFileWriter:
 
     def log(self, level: str, message: str, when: float | None = None) -> None:
         """Append a row to ``/log`` and flush."""
+        self._check_usable()
         ds = self._f["log"]
         n = ds.shape[0]
         ds.resize((n + 1,))
@@ -413,6 +442,7 @@ class RunFileWriter:
         forbids new attributes while writing, so they are set here)."""
         if self._closed:
             return
+        self._check_usable()
         if status not in STATUSES:
             raise ValueError(f"status must be one of {STATUSES}, got {status!r}")
         self._f.flush()
@@ -461,6 +491,16 @@ def open_for_reading(path: str | Path) -> Iterator[h5py.File]:
         return
     with f:
         yield f
+
+
+def pending_points(path: str | Path) -> int:
+    """Points of run file ``path`` not measured yet (pending or failed), from its ``done``
+    arrays alone (no records are read)."""
+    with open_for_reading(path) as f:
+        scans = f["scan"] if "scan" in f else {}
+        return sum(
+            int(np.sum(scans[d]["done"][...] != PointState.DONE)) for d in DIRECTIONS if d in scans
+        )
 
 
 def _publish(tmp: Path, path: Path) -> None:

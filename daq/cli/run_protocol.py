@@ -338,6 +338,8 @@ def _execute(
         print(line, file=sys.stdout if code == ExitCode.COMPLETE else sys.stderr, flush=True)
     except OSError:  # the terminal is gone (SIGHUP ignored): the log file has the line
         _leave_the_terminal()
+    if engine.file_broken:  # HDF5 crashed the process closing such a file at its exit (139)
+        os._exit(int(code))
     return int(code)
 
 

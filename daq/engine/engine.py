@@ -34,10 +34,11 @@ from daq.engine.events import EventBus, EventKind, RunEvent, RunState, Subscribe
 from daq.engine.instruments import BenchInstruments
 from daq.engine.plan import Plan, Point, make_plan
 from daq.store import create_run, resume_run
+from daq.store.disk_space import DiskFull, room_for_a_point
 from instruments.errors import InstrumentError, InstrumentTimeout, SignalLostError
 from instruments.interfaces import AcquisitionConfig, BurstConfig
 from protocols.bench import BenchFile
-from protocols.runfile import PointState, RunFileWriter, ScanSpec
+from protocols.runfile import PointState, RunFileError, RunFileWriter, ScanSpec
 from protocols.schema import ProtocolFile
 
 __all__ = ["DeadInstrumentError", "PointCheckError", "RequestRefused", "RunEngine", "RunResult"]
@@ -380,6 +381,8 @@ class RunEngine:
             status, reason = "aborted", self._abort_reason or "interrupted (Ctrl-C)"
         except InstrumentError as exc:
             status, reason = "failed", f"{type(exc).__name__}: {exc}"
+        except (DiskFull, RunFileError) as exc:  # the run file's disk is full, or failed a write
+            status, reason = "failed", str(exc)
         except Exception as exc:
             status, reason = "failed", f"unexpected {type(exc).__name__}: {exc}"
         finally:
@@ -456,6 +459,12 @@ class RunEngine:
                 points_failed_only=points_failed_only,
             )
         return self.result
+
+    @property
+    def file_broken(self) -> str | None:
+        """Why the run file took no more writes (a records write failed: a full disk), else
+        ``None``; such a file is left as a killed writer leaves one."""
+        return None if self._writer is None else self._writer.broken
 
     def _simulation_attrs(self) -> dict[str, Any] | None:
         """``/simulation`` attributes of a simulated-bench run: the DEM runs served during this
@@ -628,6 +637,7 @@ class RunEngine:
         t_start = t_last = time.monotonic()
         for k, point in enumerate(todo):
             self._check_boundary()
+            room_for_a_point(self.out_path, time_s.size, n_done)  # else DiskFull: the run ends
             if armed != (point.direction, point.amplitude_index):
                 self._arm_generator(point)
                 armed = (point.direction, point.amplitude_index)
