@@ -27,6 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from analysis.study_cells import StudySetup, TaskResult, run_task, task_cells
+from daq.store.disk_space import room_for_a_task
 from protocols.study import CellTable
 from protocols.studyfile import StudyStore
 
@@ -113,6 +114,7 @@ def run_study(
 
     def finish(i: int, res: TaskResult) -> None:
         nonlocal n_done, task_s
+        room_for_a_task(store.path, n_done)
         store.write_task(i, res)
         n_done += int(res.cells.size)
         task_s += res.wall_s

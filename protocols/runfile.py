@@ -445,16 +445,24 @@ class RunFileWriter:
         self._check_usable()
         if status not in STATUSES:
             raise ValueError(f"status must be one of {STATUSES}, got {status!r}")
-        self._f.flush()
-        self._f.close()
-        self._closed = True
-        with h5py.File(self.path, "r+", libver="latest") as f:
-            f.attrs["status"] = status
-            f.attrs["finished"] = _now_iso()
-            if simulation:
-                sim = f.require_group("simulation")
-                for key, value in simulation.items():
-                    sim.attrs[key] = value
+        try:
+            self._f.flush()
+            self._f.close()
+            self._closed = True
+            with h5py.File(self.path, "r+", libver="latest") as f:
+                f.attrs["status"] = status
+                f.attrs["finished"] = _now_iso()
+                if simulation:
+                    sim = f.require_group("simulation")
+                    for key, value in simulation.items():
+                        sim.attrs[key] = value
+        except (OSError, RuntimeError) as exc:
+            why = (str(exc).strip("'\"").splitlines() or [type(exc).__name__])[0]
+            self.broken = (
+                f"{self.path}: the file could not be closed ({why}): it is left as a killed "
+                f"writer's; free some space, then biafc repair {self.path}"
+            )
+            raise RunFileError(self.broken) from None
 
     @property
     def closed(self) -> bool:

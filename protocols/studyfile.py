@@ -108,6 +108,8 @@ class StudyStore:
     def __init__(self, path: Path, f: h5py.File) -> None:
         self.path = path
         self.f = f
+        #: why the output took no more writes (a task's write failed: a full disk), else None
+        self.broken: str | None = None
 
     @classmethod
     def create(
@@ -243,28 +245,54 @@ class StudyStore:
         idx = idx[order]
         contiguous = idx.size > 0 and idx[-1] - idx[0] + 1 == idx.size
         sel: Any = slice(int(idx[0]), int(idx[-1]) + 1) if contiguous else idx
-        for name, arr in result.metrics.items():
-            if name in self.f["metrics"]:
-                self.f["metrics"][name][sel] = np.asarray(arr)[order]
-        for d, arr in result.spectra.items():
-            if "spectra" in self.f and d in self.f["spectra"]:
-                self.f["spectra"][d][sel] = np.asarray(arr)[order]
-        for cell, msg in result.messages.items():
-            self.f["cells/message"][int(cell)] = msg
-        self.f["tasks/wall_s"][task] = result.wall_s
-        self.f["tasks/worker"][task] = result.worker
-        self.f.flush()
-        self.f["cells/status"][sel] = np.asarray(result.status)[order]
-        self.f.flush()
+        if self.broken is not None:
+            raise StudyFileError(self.broken)
+        try:
+            written = []
+            for name, arr in result.metrics.items():
+                if name in self.f["metrics"]:
+                    written.append(self.f["metrics"][name])
+                    written[-1][sel] = np.asarray(arr)[order]
+            for d, arr in result.spectra.items():
+                if "spectra" in self.f and d in self.f["spectra"]:
+                    written.append(self.f["spectra"][d])
+                    written[-1][sel] = np.asarray(arr)[order]
+            for cell, msg in result.messages.items():
+                self.f["cells/message"][int(cell)] = msg
+            self.f["tasks/wall_s"][task] = result.wall_s
+            self.f["tasks/worker"][task] = result.worker
+            for ds in written:  # a chunk HDF5 fails to write is reported here, or nowhere
+                ds.flush()
+            self.f.flush()
+            self.f["cells/status"][sel] = np.asarray(result.status)[order]
+            self.f.flush()
+        except (OSError, RuntimeError) as exc:
+            why = (str(exc).strip("'\"").splitlines() or [type(exc).__name__])[0]
+            self.broken = (
+                f"{self.path}: task {task} could not be written ({why}): the output is left as "
+                f"a killed writer's; free some space, then biafc repair {self.path} and run "
+                "the study again to continue"
+            )
+            raise StudyFileError(self.broken) from None
 
     def close(self, status: str) -> None:
-        """Mark the output ``complete``, ``incomplete`` (interrupted) or ``failed``; close."""
-        if not self.f.id.valid:
+        """Mark the output ``complete``, ``incomplete`` (interrupted) or ``failed``; close. A
+        store that failed a write (:attr:`broken`) leaves the file alone: HDF5 left an output
+        it closed after a failed write on a full disk unreadable, even to ``biafc repair``."""
+        if self.broken is not None or not self.f.id.valid:
             return
-        self.f.flush()
-        self.f.close()
-        with h5py.File(self.path, "r+", libver="latest") as f:  # attributes: outside SWMR
-            f.attrs["status"] = status
+        try:
+            self.f.flush()
+            self.f.close()
+            with h5py.File(self.path, "r+", libver="latest") as f:  # attributes: outside SWMR
+                f.attrs["status"] = status
+        except (OSError, RuntimeError) as exc:
+            why = (str(exc).strip("'\"").splitlines() or [type(exc).__name__])[0]
+            self.broken = (
+                f"{self.path}: the output could not be closed ({why}): it is left as a killed "
+                f"writer's; free some space, then biafc repair {self.path}"
+            )
+            raise StudyFileError(self.broken) from None
 
 
 def _software() -> str:

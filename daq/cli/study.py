@@ -54,6 +54,7 @@ def run(args: argparse.Namespace) -> int:
         stored_names,
         task_cells,
     )
+    from daq.store.disk_space import MARGIN_BYTES, free_bytes
     from daq.store.lock import FileInUse, RunFileLock
     from protocols.study import cell_table, load_study
     from protocols.studyfile import StudyFileError, StudyStore
@@ -84,6 +85,12 @@ def run(args: argparse.Namespace) -> int:
     if args.dry_run:
         _announce(study, table, tasks, out)
         return 0
+    free = free_bytes(out)
+    if free is not None and free < MARGIN_BYTES:  # an output made on a full disk is unreadable
+        raise CliError(
+            f"{out}: its disk has {free / 2**20:.3g} MB free; a study keeps "
+            f"{MARGIN_BYTES / 2**20:g} MB to spare: free some space or write the output elsewhere"
+        )
     lock = RunFileLock(out)
     try:
         lock.acquire()
@@ -123,12 +130,15 @@ def _run(args: argparse.Namespace, setup: Any, table: Any, store: Any) -> int:
 
     from analysis.study_cells import STATUS_FAILED, STATUS_INACCURATE
     from daq.progress import ProgressDisplay
+    from daq.store.disk_space import DiskFull
     from daq.study_runner import dask_client, run_study
+    from protocols.studyfile import StudyFileError
 
     done0 = int(store.done().sum())
     if done0:
         print(f"continuing: {done0} of {table.n_cells} cells done already", file=sys.stderr)
     status = "failed"
+    error: Exception | None = None
     t0 = time.perf_counter()
     try:
         with ProgressDisplay(
@@ -149,13 +159,25 @@ def _run(args: argparse.Namespace, setup: Any, table: Any, store: Any) -> int:
         status = "incomplete"
         raise
     except Exception as exc:
-        first = str(exc).splitlines()[0] if str(exc) else ""
-        print(f"biafc study: failed: {type(exc).__name__}: {first}", file=sys.stderr)
-        print("the output keeps every finished task; run again to continue", file=sys.stderr)
-        return 1
+        error = exc
     finally:
-        codes = store.f["cells/status"][...] if store.f.id.valid else np.zeros(0)
-        store.close(status)
+        usable = store.broken is None and store.f.id.valid
+        codes = store.f["cells/status"][...] if usable else np.zeros(0)
+        try:
+            store.close(status)
+        except StudyFileError:
+            pass  # store.broken says why
+        if store.broken is not None:  # a full disk: the output is left as a killed writer's
+            print(f"biafc study: failed: {store.broken}", file=sys.stderr, flush=True)
+            os._exit(1)  # HDF5 crashed the process closing such a file at its exit
+    if error is not None:
+        first = str(error).splitlines()[0] if str(error) else ""
+        if isinstance(error, DiskFull):
+            print(f"biafc study: failed: {first}", file=sys.stderr)
+        else:
+            print(f"biafc study: failed: {type(error).__name__}: {first}", file=sys.stderr)
+            print("the output keeps every finished task; run again to continue", file=sys.stderr)
+        return 1
     failed = int(np.sum(codes == STATUS_FAILED))
     inaccurate = int(np.sum(codes == STATUS_INACCURATE))
     wall = time.perf_counter() - t0

@@ -12,6 +12,10 @@ Then the process crashed at exit. Now:
 - the writer flushes a point's records before it marks the point measured
   (:meth:`protocols.runfile.RunFileWriter.write_point`): a write that fails anyway refuses
   the point.
+
+A design study's output (``biafc study``) is checked before each task's write
+(:func:`room_for_a_task`) and written the same way
+(:meth:`protocols.studyfile.StudyStore.write_task`).
 """
 
 from __future__ import annotations
@@ -19,7 +23,15 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
-__all__ = ["MARGIN_BYTES", "DiskFull", "free_bytes", "point_bytes", "room_for_a_point", "shortfall"]
+__all__ = [
+    "MARGIN_BYTES",
+    "DiskFull",
+    "free_bytes",
+    "point_bytes",
+    "room_for_a_point",
+    "room_for_a_task",
+    "shortfall",
+]
 
 #: kept free beyond the points' records (bytes): the file's own structure, its log rows and
 #: closing, ``RUN.log``, and room for the rest of the system
@@ -67,6 +79,18 @@ def shortfall(path: str | Path, n_points: int, samples: int) -> str | None:
         f"channels x 4 bytes, and {_mb(MARGIN_BYTES)} to spare) but its disk has {_mb(free)} "
         "free; free some space or write the run elsewhere"
     )
+
+
+def room_for_a_task(path: str | Path, n_kept: int) -> None:
+    """Raise :class:`DiskFull` when the disk of study output ``path`` has less than
+    :data:`MARGIN_BYTES` free (a task's numbers are far smaller); ``n_kept`` cells are in it."""
+    free = free_bytes(path)
+    if free is not None and free < MARGIN_BYTES:
+        raise DiskFull(
+            f"the disk of {path} is full: {_mb(free)} free, a study keeps {_mb(MARGIN_BYTES)} "
+            f"to spare; {n_kept} cell(s) kept: free some space, then run the study again to "
+            "continue"
+        )
 
 
 def room_for_a_point(path: str | Path, samples: int, n_kept: int) -> None:
