@@ -424,8 +424,10 @@ class RunEngine:
                 )
                 try:
                     self._writer.close(status, simulation=self._simulation_attrs())  # type: ignore[arg-type]
-                except Exception as exc:
+                except Exception as exc:  # the file's status is not written: not complete
                     reason = reason or f"closing the run file failed: {exc}"
+                    if status == "complete":
+                        status = "failed"
             if self._file_lock is not None:
                 self._file_lock.release()
             self._set_state(RunState(status))

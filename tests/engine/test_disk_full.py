@@ -131,6 +131,26 @@ def test_a_records_write_that_fails_leaves_the_point_pending_and_the_file_alone(
     assert run.scans["ltr"].done[0, 2] == PointState.PENDING
 
 
+def test_a_run_whose_file_cannot_be_closed_is_not_complete(
+    protocol, bench, out, monkeypatch
+) -> None:
+    """Every point measured, but the final status could not be written (the disk filled at the
+    end): the file says 'running' until ``biafc repair``, so the run is not reported complete
+    (it was, exit 0)."""
+    from protocols.runfile import RunFileError, RunFileWriter
+
+    def close(self: RunFileWriter, status: str, **k: object) -> None:
+        self.broken = f"{self.path}: the file could not be closed (file write failed)"
+        raise RunFileError(self.broken)
+
+    monkeypatch.setattr(RunFileWriter, "close", close)
+    eng = RunEngine(protocol, bench, fake_bench(FakeWorld()), out)
+    res = eng.run()
+    assert res.n_measured_now == 12 and res.safe_state_s is not None
+    assert res.status == "failed" and "could not be closed" in res.reason
+    assert eng.file_broken is not None
+
+
 # -- a real full disk ------------------------------------------------------------------------
 def _tmpfs(folder: Path, size: str) -> bool:
     folder.mkdir()
