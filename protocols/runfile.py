@@ -65,6 +65,7 @@ import h5py
 import numpy as np
 from numpy.typing import NDArray
 
+from protocols.finish_open import open_to_finish
 from protocols.hdf5probe import HDF5ProbeError, probe_hdf5
 from protocols.recover import ClearedView, has_consistency_flags
 from protocols.swmr_read import open_swmr
@@ -449,7 +450,7 @@ class RunFileWriter:
             self._f.flush()
             self._f.close()
             self._closed = True
-            with h5py.File(self.path, "r+", libver="latest") as f:
+            with open_to_finish(self.path) as f:  # waits for readers following the run
                 f.attrs["status"] = status
                 f.attrs["finished"] = _now_iso()
                 if simulation:

@@ -42,6 +42,7 @@ import h5py
 import numpy as np
 from numpy.typing import NDArray
 
+from protocols.finish_open import open_to_finish
 from protocols.study import METRICS, PARAMETERS, CellTable
 from protocols.studyformat import FORMAT, FORMAT_VERSION, StudyFileError
 
@@ -284,7 +285,7 @@ class StudyStore:
         try:
             self.f.flush()
             self.f.close()
-            with h5py.File(self.path, "r+", libver="latest") as f:  # attributes: outside SWMR
+            with open_to_finish(self.path) as f:  # attributes: outside SWMR, after readers
                 f.attrs["status"] = status
         except (OSError, RuntimeError) as exc:
             why = (str(exc).strip("'\"").splitlines() or [type(exc).__name__])[0]
