@@ -198,6 +198,28 @@ def connect_bench(
                 "simulation": {"seed": world.config.seed, "faults": world.faults.as_dict()}
             },
         )
+    from daq.instrument_lock import InstrumentInUse, lock_instruments
+
+    try:  # before anything is opened: a second process would mix its commands with a scan's
+        locks = lock_instruments(
+            {
+                "generator": b.generator.resource,
+                "vibrometer": b.vibrometer.resource,
+                "stage": b.stage.resource,
+                "DAQ device": b.daq.device,
+            }
+        )
+    except InstrumentInUse as exc:
+        raise ConnectError(str(exc)) from None
+    try:
+        return _connect_hardware(b, chain, locks)
+    except BaseException:
+        locks.release()
+        raise
+
+
+def _connect_hardware(b: BenchSpec, chain: Any, locks: Any) -> BenchInstruments:
+    """The lab bench's drivers on real transports and the NI digitiser (its locks held)."""
     open_transport = _import("instruments.transport", "open_transport")
     transports = {
         "generator": open_transport(
@@ -223,4 +245,4 @@ def connect_bench(
     digitiser = _import("daq.digitiser_nidaq", "NidaqDigitiser")(
         b.daq.device, max_rate_Hz=b.daq.max_rate, terminal_config=b.daq.terminal_config
     )
-    return BenchInstruments(generator, vibrometer, stage, digitiser, chain, "hardware")
+    return BenchInstruments(generator, vibrometer, stage, digitiser, chain, "hardware", locks=locks)

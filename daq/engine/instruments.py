@@ -33,6 +33,9 @@ class BenchInstruments:
         bench passes its clock's ``sleep`` so settling costs no wall time.
     world:
         The simulated world (``sim_backend.simbench.SimWorld``) or ``None``.
+    locks:
+        A lab bench's instrument locks (:class:`daq.instrument_lock.InstrumentLocks`),
+        released by :meth:`close`; ``None`` elsewhere.
     """
 
     generator: FunctionGenerator
@@ -44,6 +47,7 @@ class BenchInstruments:
     sleep: Callable[[float], None] | None = None
     world: Any = None
     extra_snapshot: dict[str, Any] = field(default_factory=dict)
+    locks: Any = None
 
     def all(self) -> dict[str, Any]:
         return {
@@ -78,3 +82,5 @@ class BenchInstruments:
                 inst.close()
             except Exception:
                 pass
+        if self.locks is not None:
+            self.locks.release()

@@ -1,0 +1,121 @@
+"""One process at a time on each instrument of a lab bench: a lock per instrument address.
+
+Two processes could drive one rig. A ``biafc check --move`` in a second terminal, a second
+``run_protocol``, or the bench window beside a headless run would each open the same
+instruments. On Linux a serial port opens twice without complaint (pyserial does not lock it),
+and VISA shares a USB or LAN instrument between sessions. So the second process's commands mix
+with the running scan's: the stage moves under a measurement, the generator is set to another
+amplitude, a serial reply goes to the wrong process. The scan's data are then wrong, and
+nothing says so.
+
+:func:`lock_instruments` takes a lock per address before :func:`daq.connect.connect_bench` opens
+anything: the generator's VISA resource, the vibrometer's and the stage's ports, the DAQ device.
+A second process is refused in one line naming the instrument and the process that holds it
+(exit status 2). The locks are those of the run files (:class:`daq.store.lock.RunFileLock`):
+a lock left by a process that no longer runs is taken over. They live in the user's cache
+folder (``<cache_dir>/instruments``), so they guard the processes of one user account. One
+process may connect its bench again (the bench window reconnecting): the locks count its
+connections. A simulated bench is never locked: its instruments are its process's own.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import re
+import threading
+from pathlib import Path
+from typing import Any
+
+from daq.store.lock import FileInUse, RunFileLock
+
+__all__ = ["InstrumentInUse", "InstrumentLocks", "lock_instruments"]
+
+#: this process's held locks: lock path -> connections that hold it
+_HELD: dict[Path, int] = {}
+_GUARD = threading.Lock()
+
+
+class InstrumentInUse(RuntimeError):
+    """Another live process holds an instrument of the bench (the message is one line)."""
+
+
+class _InstrumentLock(RunFileLock):
+    """A run file's lock, worded for an instrument."""
+
+    def __init__(self, path: Path, what: str) -> None:
+        super().__init__(path)
+        self.what = what
+
+    def _in_use(self, other: dict[str, Any]) -> str:
+        return (
+            f"{self.what} is in use by process {other.get('pid')} on {other.get('host', '?')} "
+            f"(since {other.get('since')}: {other.get('command', '')!s:.80}); wait for it to "
+            "end or stop it"
+        )
+
+
+def _drop(path: Path) -> None:
+    """One connection of this process lets ``path`` go; the last removes the lock file.
+    Call with ``_GUARD`` held."""
+    _HELD[path] -= 1
+    if _HELD[path] == 0:
+        del _HELD[path]
+        lock = RunFileLock(path)
+        lock.held = True  # taken by this process (release() checks the PID in the file)
+        lock.release()
+
+
+def _folder() -> Path:
+    from instruments.user_cache import cache_dir
+
+    return cache_dir() / "instruments"
+
+
+def _name(address: str) -> str:
+    """A file name for an instrument address (readable, and unique by its hash)."""
+    slug = re.sub(r"[^A-Za-z0-9]+", "_", address).strip("_")[:48] or "instrument"
+    return f"{slug}-{hashlib.sha256(address.encode()).hexdigest()[:12]}"
+
+
+class InstrumentLocks:
+    """The locks one connection of a bench holds; :meth:`release` once, when it closes."""
+
+    def __init__(self, paths: list[Path]) -> None:
+        self.paths = paths
+        self._released = False
+
+    def release(self) -> None:
+        with _GUARD:
+            if self._released:
+                return
+            self._released = True
+            for path in self.paths:
+                _drop(path)
+
+
+def lock_instruments(addresses: dict[str, str]) -> InstrumentLocks:
+    """Lock every instrument of ``addresses`` (role -> address, e.g. ``"generator"`` ->
+    ``"USB0::0x0957::0x2807::MY1::INSTR"``) for this process, or raise
+    :class:`InstrumentInUse` naming the first one another live process holds (the locks taken
+    so far are released)."""
+    taken: list[Path] = []
+    locks = InstrumentLocks(taken)
+    folder = _folder()
+    with _GUARD:
+        try:
+            for role, address in addresses.items():
+                path = folder / _name(address)
+                if path not in _HELD:
+                    try:
+                        _InstrumentLock(path, f"the {role} {address}").acquire()
+                    except FileInUse as exc:
+                        raise InstrumentInUse(str(exc)) from None
+                    _HELD[path] = 0
+                _HELD[path] += 1
+                taken.append(path)
+        except BaseException:
+            locks._released = True
+            for path in taken:
+                _drop(path)
+            raise
+    return locks

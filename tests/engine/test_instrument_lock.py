@@ -1,0 +1,156 @@
+"""One process at a time on a lab bench's instruments (:mod:`daq.instrument_lock`): a second
+process is refused before it opens anything, naming the instrument and the process holding it;
+the holder's closing, or its death, frees them; a simulated bench takes no lock.
+
+Before, a second process connected the same rig without a word: on Linux a serial port opens
+twice, and VISA shares an instrument between sessions, so its commands mixed with a running
+scan's."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+import daq.connect
+from daq.cli import run_protocol as rp
+from daq.connect import ConnectError, connect_bench
+from protocols.bench import default_bench_path, load_bench
+from sim_backend.simbench import SimWorld, SimWorldConfig
+
+LAB = default_bench_path().parent / "lab_bench.yaml"
+ROOT = Path(__file__).resolve().parents[2]
+
+#: another process: connects the lab bench (its cables to a simulated rig), says so, waits
+_HOLDER = r"""
+import sys, time
+import daq.digitiser_nidaq, instruments.transport
+from sim_backend.simbench import SimWorld, SimWorldConfig
+from daq.connect import connect_bench
+world = SimWorld(SimWorldConfig())
+instruments.transport.open_transport = lambda r, *, name, **k: world.transport(name)
+class NoCard:
+    def __init__(self, device, **kw): self.device = device
+    def snapshot(self): return {"device": self.device}
+    def close(self): pass
+daq.digitiser_nidaq.NidaqDigitiser = NoCard
+bench = connect_bench(sys.argv[1])
+print("connected", flush=True)
+time.sleep(60)
+"""
+
+
+@pytest.fixture
+def cables(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> list[str]:
+    """The lab bench's transports on a simulated rig, no NI card, the locks in a fresh cache
+    folder; returns the instruments opened, in order."""
+    import daq.digitiser_nidaq
+    import instruments.transport
+
+    monkeypatch.setenv("BIAFC_CACHE_DIR", str(tmp_path / "cache"))
+    world = SimWorld(SimWorldConfig())
+    opened: list[str] = []
+
+    def open_transport(resource: str, *, name: str, **kw: Any) -> Any:
+        opened.append(name)
+        return world.transport(name)
+
+    class NoCard:
+        def __init__(self, device: str, **kw: Any) -> None:
+            self.device = device
+
+        def snapshot(self) -> dict[str, Any]:
+            return {"device": self.device}
+
+        def close(self) -> None:
+            pass
+
+    monkeypatch.setattr(instruments.transport, "open_transport", open_transport)
+    monkeypatch.setattr(daq.digitiser_nidaq, "NidaqDigitiser", NoCard)
+    return opened
+
+
+def _locks(tmp_path: Path) -> list[str]:
+    folder = tmp_path / "cache" / "instruments"
+    return sorted(p.name for p in folder.glob("*.lock")) if folder.exists() else []
+
+
+def _holder(tmp_path: Path) -> subprocess.Popen[str]:
+    env = dict(os.environ, BIAFC_CACHE_DIR=str(tmp_path / "cache"))
+    proc = subprocess.Popen([sys.executable, "-c", _HOLDER, str(LAB)], cwd=ROOT, env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
+    assert proc.stdout is not None
+    assert proc.stdout.readline().strip() == "connected", proc.communicate()
+    return proc
+
+
+def test_a_second_process_is_refused_the_instruments_of_a_connected_bench(
+    cables: list[str], tmp_path: Path
+) -> None:
+    holder = _holder(tmp_path)
+    try:
+        with pytest.raises(ConnectError) as exc:
+            connect_bench(LAB)
+    finally:
+        holder.kill()
+        holder.wait(10)
+    msg = str(exc.value)
+    generator = load_bench(LAB).bench.generator.resource
+    assert f"the generator {generator} is in use by process {holder.pid}" in msg
+    assert "\n" not in msg and "wait for it to end or stop it" in msg
+    assert cables == []  # nothing opened
+    bench = connect_bench(LAB)  # the holder is gone: its locks are stale, taken over
+    assert cables == ["generator", "vibrometer", "stage"]
+    bench.close()
+    assert _locks(tmp_path) == []
+
+
+def test_run_protocol_on_a_bench_in_use_is_refused_with_exit_2(
+    cables: list[str], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    holder = _holder(tmp_path)
+    try:
+        code = rp.main(["smoke.yaml", "--bench", str(LAB), "--out", str(tmp_path / "r.h5"), "-q"])
+    finally:
+        holder.kill()
+        holder.wait(10)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and "is in use by process" in err[-1]
+    assert cables == [] and not (tmp_path / "r.h5").exists()
+
+
+def test_one_process_may_connect_again_and_the_last_close_frees_the_instruments(
+    cables: list[str], tmp_path: Path
+) -> None:
+    a = connect_bench(LAB)
+    b = connect_bench(LAB)  # the bench window reconnecting, say
+    assert len(_locks(tmp_path)) == 4  # generator, vibrometer, stage, DAQ device
+    a.close()
+    assert len(_locks(tmp_path)) == 4
+    b.close()
+    b.close()  # twice: no harm
+    assert _locks(tmp_path) == []
+
+
+def test_a_simulated_bench_takes_no_lock(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("BIAFC_CACHE_DIR", str(tmp_path / "cache"))
+    a, b = connect_bench(), connect_bench()  # each its own emulated rig
+    assert _locks(tmp_path) == []
+    a.close()
+    b.close()
+
+
+def test_a_failed_connection_lets_its_locks_go(
+    cables: list[str], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    def dead(*a: Any, **k: Any) -> Any:
+        raise ConnectError("the vibrometer does not answer")
+
+    monkeypatch.setattr(daq.connect, "build_drivers", dead)
+    with pytest.raises(ConnectError, match="does not answer"):
+        connect_bench(LAB)
+    assert _locks(tmp_path) == []
