@@ -399,8 +399,8 @@ class RunFileWriter:
             self.broken = (
                 f"{self.path}: the records of point {direction} amplitude #{amplitude_index + 1} "
                 f"cylinder #{cylinder_index + 1} could not be written ({why}): the file is left "
-                f"as a killed writer's; free some space, then biafc repair {self.path} and "
-                f"run_protocol --resume {self.path}"
+                f"as a killed writer's; free some space, then run_protocol --resume {self.path} "
+                f"(or biafc repair {self.path} to read it as it is)"
             )
             raise RunFileError(self.broken) from None
         g["measured_at"][amplitude_index, cylinder_index] = (
