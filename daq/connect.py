@@ -35,6 +35,7 @@ from protocols.bench import BenchFile, BenchSpec, load_bench
 from protocols.yamlfile import ConfigError
 
 __all__ = [
+    "BenchInUse",
     "ConnectError",
     "build_drivers",
     "connect_bench",
@@ -45,6 +46,11 @@ __all__ = [
 
 class ConnectError(ConfigError):
     """The bench cannot be connected (missing driver, bad simulation setting); one line."""
+
+
+class BenchInUse(ConnectError):
+    """Another live process drives an instrument of the bench (:mod:`daq.instrument_lock`);
+    nothing was opened. One line."""
 
 
 def sim_world_config(
@@ -210,7 +216,7 @@ def connect_bench(
             }
         )
     except InstrumentInUse as exc:
-        raise ConnectError(str(exc)) from None
+        raise BenchInUse(str(exc)) from None
     try:
         return _connect_hardware(b, chain, locks)
     except BaseException:

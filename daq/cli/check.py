@@ -66,7 +66,7 @@ def print_findings(findings: list[Any], out: TextIO) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from daq import preflight
-    from daq.connect import connect_bench
+    from daq.connect import BenchInUse, connect_bench
     from instruments.errors import InstrumentError
     from instruments.units import UnitError
     from protocols.bench import default_bench_path, load_bench
@@ -99,6 +99,9 @@ def run(args: argparse.Namespace) -> int:
     print(f"biafc check: {name} ({bf.bench.name!r}, {kind} bench)")
     try:
         inst = connect_bench(bf)
+    except BenchInUse as exc:  # refused: another process drives the bench, nothing was opened
+        print(f"biafc check: refused: {exc}", file=sys.stderr)
+        return 2
     except (ConfigError, InstrumentError, OSError) as exc:
         print(f"biafc check: cannot connect: {str(exc).splitlines()[0]}", file=sys.stderr)
         return 1

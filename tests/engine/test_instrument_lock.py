@@ -123,6 +123,22 @@ def test_run_protocol_on_a_bench_in_use_is_refused_with_exit_2(
     assert cables == [] and not (tmp_path / "r.h5").exists()
 
 
+def test_biafc_check_on_a_bench_in_use_is_refused_with_exit_2(
+    cables: list[str], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from daq.cli.biafc import main
+
+    holder = _holder(tmp_path)
+    try:
+        code = main(["check", str(LAB), "--move"])
+    finally:
+        holder.kill()
+        holder.wait(10)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and err[-1].startswith("biafc check: refused: the generator")
+    assert cables == []  # no burst, no move: nothing opened
+
+
 def test_one_process_may_connect_again_and_the_last_close_frees_the_instruments(
     cables: list[str], tmp_path: Path
 ) -> None:
