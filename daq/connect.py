@@ -217,6 +217,11 @@ def connect_bench(
         )
     except InstrumentInUse as exc:
         raise BenchInUse(str(exc)) from None
+    except OSError as exc:  # the cache folder cannot be written: no lock, so no connection
+        raise ConnectError(
+            f"cannot lock the bench's instruments in {exc.filename or 'the cache folder'} "
+            f"({exc.strerror or exc}): set BIAFC_CACHE_DIR to a folder this user can write"
+        ) from None
     try:
         return _connect_hardware(b, chain, locks)
     except BaseException:

@@ -152,6 +152,18 @@ def test_one_process_may_connect_again_and_the_last_close_frees_the_instruments(
     assert _locks(tmp_path) == []
 
 
+def test_a_cache_folder_that_cannot_be_written_is_one_line_before_anything_opens(
+    cables: list[str], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    blocker = tmp_path / "a_file"
+    blocker.write_text("not a folder")
+    monkeypatch.setenv("BIAFC_CACHE_DIR", str(blocker / "cache"))
+    with pytest.raises(ConnectError, match="cannot lock the bench's instruments") as exc:
+        connect_bench(LAB)
+    assert "BIAFC_CACHE_DIR" in str(exc.value) and "\n" not in str(exc.value)
+    assert cables == []
+
+
 def test_a_simulated_bench_takes_no_lock(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("BIAFC_CACHE_DIR", str(tmp_path / "cache"))
     a, b = connect_bench(), connect_bench()  # each its own emulated rig
