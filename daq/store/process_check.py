@@ -30,7 +30,10 @@ def process_start(pid: int) -> str | None:
     """The start time of process ``pid`` as a string to compare, or ``None`` where it cannot be
     read (no such process, another user's on Windows, a system without ``/proc``)."""
     if sys.platform == "win32":
-        return _win32_process(pid)[1]
+        try:
+            return _win32_process(pid)[1]
+        except (OSError, AttributeError, ValueError):  # the query failed: no time to compare
+            return None
     try:
         stat = Path(f"/proc/{pid}/stat").read_text()
     except OSError:
@@ -46,7 +49,10 @@ def process_alive(pid: int, started: str | None) -> bool:
     if pid <= 0:
         return False
     if sys.platform == "win32":
-        running, now = _win32_process(pid)
+        try:
+            running, now = _win32_process(pid)
+        except (OSError, AttributeError, ValueError):  # the query failed: never a guessed takeover
+            return True
     else:
         try:
             os.kill(pid, 0)  # POSIX: signal 0 checks that the process exists, sends nothing

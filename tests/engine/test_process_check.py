@@ -82,6 +82,20 @@ def test_on_windows_a_dead_or_reused_pid_is_stale_and_taken_over(
     assert windows == []
 
 
+def test_on_windows_a_query_that_fails_counts_the_process_as_running(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A lock is never taken over on a guess: a failed query leaves the writer its lock."""
+
+    def broken(pid: int) -> tuple[bool, str | None]:
+        raise OSError("kernel32 call failed")
+
+    monkeypatch.setattr(sys, "platform", "win32")
+    monkeypatch.setattr(process_check, "_win32_process", broken)
+    assert process_check.process_alive(WRITER, "42")
+    assert process_check.process_start(WRITER) is None
+
+
 def test_a_running_process_its_successor_and_its_end_on_this_host() -> None:
     child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(30)"])
     try:
