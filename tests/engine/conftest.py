@@ -9,7 +9,7 @@ import pytest
 from protocols.bench import BenchFile, load_bench
 from protocols.schema import ProtocolFile
 
-from .helpers import make_protocol
+from .helpers import PROTOCOL, make_protocol
 
 
 @pytest.fixture
@@ -25,3 +25,11 @@ def bench() -> BenchFile:
 @pytest.fixture
 def out(tmp_path: Path) -> Path:
     return tmp_path / "run.h5"
+
+
+@pytest.fixture
+def proto_file(tmp_path: Path) -> Path:
+    """:data:`helpers.PROTOCOL` as a file."""
+    f = tmp_path / "proto.yaml"
+    f.write_text(PROTOCOL)
+    return f

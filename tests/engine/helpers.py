@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -56,6 +57,36 @@ def killed_run(folder: Path, points: int = 2) -> Path:
         proc.kill()
         proc.wait(10)
     return path
+
+
+def cable_lab_bench(monkeypatch: Any) -> list[tuple[str, str, float]]:
+    """The lab bench's transports on a simulated rig, and no NI card: ``connect_bench`` of a
+    lab bench file then opens its drivers on emulated instruments. Returns ``(name, resource,
+    timeout_s)`` of each transport opened, in order."""
+    import daq.digitiser_nidaq
+    import instruments.transport
+    from sim_backend.simbench import SimWorld, SimWorldConfig
+
+    world = SimWorld(SimWorldConfig())
+    opened: list[tuple[str, str, float]] = []
+
+    def open_transport(resource: str, *, name: str, timeout_s: float, **kw: Any) -> Any:
+        opened.append((name, resource, timeout_s))
+        return world.transport(name)
+
+    class NoCard:
+        def __init__(self, device: str, **kw: Any) -> None:
+            self.device = device
+
+        def snapshot(self) -> dict[str, Any]:
+            return {"device": self.device}
+
+        def close(self) -> None:
+            pass
+
+    monkeypatch.setattr(instruments.transport, "open_transport", open_transport)
+    monkeypatch.setattr(daq.digitiser_nidaq, "NidaqDigitiser", NoCard)
+    return opened
 
 
 def flip_bytes(path: Path, offset: int, n: int = 8) -> None:

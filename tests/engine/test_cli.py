@@ -26,13 +26,6 @@ TESTS = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture
-def proto_file(tmp_path: Path) -> Path:
-    f = tmp_path / "proto.yaml"
-    f.write_text(PROTOCOL)
-    return f
-
-
-@pytest.fixture
 def no_instruments(monkeypatch: pytest.MonkeyPatch) -> list[int]:
     calls: list[int] = []
 

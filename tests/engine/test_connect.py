@@ -3,15 +3,14 @@ bench and the lab bench go through the same driver construction, from the same f
 
 from __future__ import annotations
 
-from typing import Any
-
 import pytest
 
 import daq.connect
 from daq.connect import connect_bench
 from instruments.interfaces import Digitiser, FunctionGenerator, Stage, Vibrometer
 from protocols.bench import default_bench_path, load_bench
-from sim_backend.simbench import SimWorld, SimWorldConfig
+
+from .helpers import cable_lab_bench
 
 ROOT = default_bench_path().parent
 
@@ -42,31 +41,13 @@ def test_lab_bench_builds_its_drivers_exactly_like_the_simulated_one(
 ) -> None:
     """The lab bench file, with its transports replaced by a simulated rig's, gives drivers
     with the same settings as the simulated bench file: there is one construction path."""
-    import daq.digitiser_nidaq
-    import instruments.transport
-
-    world = SimWorld(SimWorldConfig())
-    opened: dict[str, tuple[str, float]] = {}
-
-    def open_transport(resource: str, *, name: str, timeout_s: float, **kw: Any) -> Any:
-        opened[name] = (resource, timeout_s)
-        return world.transport(name)
-
-    class NoCard:
-        def __init__(self, device: str, **kw: Any) -> None:
-            self.device = device
-
-        def snapshot(self) -> dict[str, Any]:
-            return {"device": self.device}
-
-    monkeypatch.setattr(instruments.transport, "open_transport", open_transport)
-    monkeypatch.setattr(daq.digitiser_nidaq, "NidaqDigitiser", NoCard)
+    cables = cable_lab_bench(monkeypatch)
     lab_file = load_bench(ROOT / "lab_bench.yaml")
     lab = connect_bench(lab_file)
     sim = connect_bench()
     assert lab.backend == "hardware" and lab.world is None
     lab_spec = lab_file.bench
-    assert opened == {
+    assert {name: (resource, timeout) for name, resource, timeout in cables} == {
         "generator": (lab_spec.generator.resource, lab_spec.generator.timeout),
         "vibrometer": (lab_spec.vibrometer.resource, lab_spec.vibrometer.timeout),
         "stage": (lab_spec.stage.resource, lab_spec.stage.timeout),

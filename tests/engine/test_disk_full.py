@@ -36,13 +36,6 @@ TESTS = Path(__file__).resolve().parents[1]
 POINT = 2 * 4 * 220
 
 
-@pytest.fixture
-def proto_file(tmp_path: Path) -> Path:
-    f = tmp_path / "proto.yaml"
-    f.write_text(PROTOCOL)
-    return f
-
-
 def _free(monkeypatch: pytest.MonkeyPatch, *values: int) -> list[int]:
     """The disk's free bytes, in turn (the last one from then on); returns the calls made."""
     calls: list[int] = []

@@ -20,7 +20,8 @@ import daq.connect
 from daq.cli import run_protocol as rp
 from daq.connect import ConnectError, connect_bench
 from protocols.bench import default_bench_path, load_bench
-from sim_backend.simbench import SimWorld, SimWorldConfig
+
+from .helpers import cable_lab_bench
 
 LAB = default_bench_path().parent / "lab_bench.yaml"
 ROOT = Path(__file__).resolve().parents[2]
@@ -28,16 +29,10 @@ ROOT = Path(__file__).resolve().parents[2]
 #: another process: connects the lab bench (its cables to a simulated rig), says so, waits
 _HOLDER = r"""
 import sys, time
-import daq.digitiser_nidaq, instruments.transport
-from sim_backend.simbench import SimWorld, SimWorldConfig
+import pytest
+from engine.helpers import cable_lab_bench
 from daq.connect import connect_bench
-world = SimWorld(SimWorldConfig())
-instruments.transport.open_transport = lambda r, *, name, **k: world.transport(name)
-class NoCard:
-    def __init__(self, device, **kw): self.device = device
-    def snapshot(self): return {"device": self.device}
-    def close(self): pass
-daq.digitiser_nidaq.NidaqDigitiser = NoCard
+cable_lab_bench(pytest.MonkeyPatch())
 bench = connect_bench(sys.argv[1])
 print("connected", flush=True)
 time.sleep(60)
@@ -45,33 +40,11 @@ time.sleep(60)
 
 
 @pytest.fixture
-def cables(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> list[str]:
-    """The lab bench's transports on a simulated rig, no NI card, the locks in a fresh cache
-    folder; returns the instruments opened, in order."""
-    import daq.digitiser_nidaq
-    import instruments.transport
-
+def cables(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> list[tuple[str, str, float]]:
+    """The lab bench cabled to a simulated rig (:func:`helpers.cable_lab_bench`), the locks in
+    a fresh cache folder; returns the transports opened, in order."""
     monkeypatch.setenv("BIAFC_CACHE_DIR", str(tmp_path / "cache"))
-    world = SimWorld(SimWorldConfig())
-    opened: list[str] = []
-
-    def open_transport(resource: str, *, name: str, **kw: Any) -> Any:
-        opened.append(name)
-        return world.transport(name)
-
-    class NoCard:
-        def __init__(self, device: str, **kw: Any) -> None:
-            self.device = device
-
-        def snapshot(self) -> dict[str, Any]:
-            return {"device": self.device}
-
-        def close(self) -> None:
-            pass
-
-    monkeypatch.setattr(instruments.transport, "open_transport", open_transport)
-    monkeypatch.setattr(daq.digitiser_nidaq, "NidaqDigitiser", NoCard)
-    return opened
+    return cable_lab_bench(monkeypatch)
 
 
 def _locks(tmp_path: Path) -> list[str]:
@@ -80,7 +53,7 @@ def _locks(tmp_path: Path) -> list[str]:
 
 
 def _holder(tmp_path: Path) -> subprocess.Popen[str]:
-    env = dict(os.environ, BIAFC_CACHE_DIR=str(tmp_path / "cache"))
+    env = dict(os.environ, BIAFC_CACHE_DIR=str(tmp_path / "cache"), PYTHONPATH=str(ROOT / "tests"))
     proc = subprocess.Popen([sys.executable, "-c", _HOLDER, str(LAB)], cwd=ROOT, env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
     assert proc.stdout is not None
@@ -89,7 +62,7 @@ def _holder(tmp_path: Path) -> subprocess.Popen[str]:
 
 
 def test_a_second_process_is_refused_the_instruments_of_a_connected_bench(
-    cables: list[str], tmp_path: Path
+    cables: list[tuple[str, str, float]], tmp_path: Path
 ) -> None:
     holder = _holder(tmp_path)
     try:
@@ -104,13 +77,13 @@ def test_a_second_process_is_refused_the_instruments_of_a_connected_bench(
     assert "\n" not in msg and "wait for it to end or stop it" in msg
     assert cables == []  # nothing opened
     bench = connect_bench(LAB)  # the holder is gone: its locks are stale, taken over
-    assert cables == ["generator", "vibrometer", "stage"]
+    assert [name for name, _, _ in cables] == ["generator", "vibrometer", "stage"]
     bench.close()
     assert _locks(tmp_path) == []
 
 
 def test_run_protocol_on_a_bench_in_use_is_refused_with_exit_2(
-    cables: list[str], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    cables: list[tuple[str, str, float]], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     holder = _holder(tmp_path)
     try:
@@ -124,7 +97,7 @@ def test_run_protocol_on_a_bench_in_use_is_refused_with_exit_2(
 
 
 def test_biafc_check_on_a_bench_in_use_is_refused_with_exit_2(
-    cables: list[str], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    cables: list[tuple[str, str, float]], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     from daq.cli.biafc import main
 
@@ -140,7 +113,7 @@ def test_biafc_check_on_a_bench_in_use_is_refused_with_exit_2(
 
 
 def test_one_process_may_connect_again_and_the_last_close_frees_the_instruments(
-    cables: list[str], tmp_path: Path
+    cables: list[tuple[str, str, float]], tmp_path: Path
 ) -> None:
     a = connect_bench(LAB)
     b = connect_bench(LAB)  # the bench window reconnecting, say
@@ -153,7 +126,7 @@ def test_one_process_may_connect_again_and_the_last_close_frees_the_instruments(
 
 
 def test_a_cache_folder_that_cannot_be_written_is_one_line_before_anything_opens(
-    cables: list[str], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    cables: list[tuple[str, str, float]], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     blocker = tmp_path / "a_file"
     blocker.write_text("not a folder")
@@ -173,7 +146,7 @@ def test_a_simulated_bench_takes_no_lock(tmp_path: Path, monkeypatch: pytest.Mon
 
 
 def test_a_failed_connection_lets_its_locks_go(
-    cables: list[str], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    cables: list[tuple[str, str, float]], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     def dead(*a: Any, **k: Any) -> Any:
         raise ConnectError("the vibrometer does not answer")

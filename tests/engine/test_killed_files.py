@@ -13,7 +13,6 @@ from pathlib import Path
 
 import h5py
 import numpy as np
-import pytest
 
 import daq.connect
 from daq.cli import run_protocol as rp
@@ -22,17 +21,9 @@ from daq.store.lock import lock_path
 from protocols.runfile import PointState, read_run
 
 from .fakes import FakeWorld, fake_bench
-from .helpers import PROTOCOL
 from .test_cli import _spawn, _wait_done
 
 ROOT = Path(__file__).resolve().parents[2]
-
-
-@pytest.fixture
-def proto_file(tmp_path: Path) -> Path:
-    f = tmp_path / "proto.yaml"
-    f.write_text(PROTOCOL)
-    return f
 
 
 def _digest(p: Path) -> str:

@@ -12,7 +12,6 @@ import socket
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -27,13 +26,6 @@ from protocols.runfile import PointState, read_run
 from .fakes import FakeWorld, Faults, fake_bench
 from .helpers import PROTOCOL
 from .test_cli import _spawn, _wait_done
-
-
-@pytest.fixture
-def proto_file(tmp_path: Path) -> Path:
-    f = tmp_path / "proto.yaml"
-    f.write_text(PROTOCOL)
-    return f
 
 
 def _use(monkeypatch: pytest.MonkeyPatch, *worlds: FakeWorld) -> list[FakeWorld]:
