@@ -1,4 +1,5 @@
-"""Opening a file its writer has just closed, to write its final attributes (``status``).
+"""How a writer finishes its file: the reopen for its final attributes (``status``), and the
+one line when the file cannot be closed at all (:func:`not_closed`).
 
 A run file and a study output are written under SWMR, which forbids changing attributes, so
 their writer closes the file and opens it again to set the final ``status``. A reader following
@@ -16,7 +17,9 @@ from pathlib import Path
 
 import h5py
 
-__all__ = ["open_to_finish"]
+from protocols.one_line import first_line
+
+__all__ = ["not_closed", "open_to_finish"]
 
 #: how long a writer waits for readers' locks before it writes without the lock (s)
 READERS_WAIT_S = 5.0
@@ -41,3 +44,12 @@ def open_to_finish(path: str | Path, wait_s: float | None = None) -> h5py.File:
             if time.monotonic() >= deadline:
                 return h5py.File(path, "r+", libver="latest", locking=False)
         time.sleep(0.02)
+
+
+def not_closed(path: str | Path, exc: BaseException) -> str:
+    """The one line of a writer whose file could not be closed (``exc``, most often a full
+    disk): it leaves the file as a killed writer does, for ``biafc repair``."""
+    return (
+        f"{path}: the file could not be closed ({first_line(exc)}): it is left as a killed "
+        f"writer's; free some space, then biafc repair {path}"
+    )

@@ -65,8 +65,9 @@ import h5py
 import numpy as np
 from numpy.typing import NDArray
 
-from protocols.finish_open import open_to_finish
+from protocols.finish_open import not_closed, open_to_finish
 from protocols.hdf5probe import HDF5ProbeError, probe_hdf5
+from protocols.one_line import first_line
 from protocols.recover import ClearedView, has_consistency_flags
 from protocols.swmr_read import open_swmr
 
@@ -395,7 +396,7 @@ class RunFileWriter:
                 ds[amplitude_index, cylinder_index, :] = np.asarray(values, np.float32)
                 ds.flush()
         except (OSError, RuntimeError) as exc:
-            why = (str(exc).strip("'\"").splitlines() or [type(exc).__name__])[0]
+            why = first_line(exc)
             self.broken = (
                 f"{self.path}: the records of point {direction} amplitude #{amplitude_index + 1} "
                 f"cylinder #{cylinder_index + 1} could not be written ({why}): the file is left "
@@ -458,11 +459,7 @@ class RunFileWriter:
                     for key, value in simulation.items():
                         sim.attrs[key] = value
         except (OSError, RuntimeError) as exc:
-            why = (str(exc).strip("'\"").splitlines() or [type(exc).__name__])[0]
-            self.broken = (
-                f"{self.path}: the file could not be closed ({why}): it is left as a killed "
-                f"writer's; free some space, then biafc repair {self.path}"
-            )
+            self.broken = not_closed(self.path, exc)
             raise RunFileError(self.broken) from None
 
     @property
@@ -666,7 +663,7 @@ def read_open_run(path: Path, f: h5py.File) -> RunData:
 
 
 def _damaged(path: Path, exc: BaseException) -> str:
-    why = (str(exc).strip("'\"").splitlines() or [type(exc).__name__])[0]
+    why = first_line(exc)
     return f"{path}: damaged HDF5 file, cannot be read ({why})"
 
 

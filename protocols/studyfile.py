@@ -42,7 +42,8 @@ import h5py
 import numpy as np
 from numpy.typing import NDArray
 
-from protocols.finish_open import open_to_finish
+from protocols.finish_open import not_closed, open_to_finish
+from protocols.one_line import first_line
 from protocols.study import METRICS, PARAMETERS, CellTable
 from protocols.studyformat import FORMAT, FORMAT_VERSION, StudyFileError
 
@@ -268,7 +269,7 @@ class StudyStore:
             self.f["cells/status"][sel] = np.asarray(result.status)[order]
             self.f.flush()
         except (OSError, RuntimeError) as exc:
-            why = (str(exc).strip("'\"").splitlines() or [type(exc).__name__])[0]
+            why = first_line(exc)
             self.broken = (
                 f"{self.path}: task {task} could not be written ({why}): the output is left as "
                 f"a killed writer's; free some space, then biafc repair {self.path} and run "
@@ -288,11 +289,7 @@ class StudyStore:
             with open_to_finish(self.path) as f:  # attributes: outside SWMR, after readers
                 f.attrs["status"] = status
         except (OSError, RuntimeError) as exc:
-            why = (str(exc).strip("'\"").splitlines() or [type(exc).__name__])[0]
-            self.broken = (
-                f"{self.path}: the output could not be closed ({why}): it is left as a killed "
-                f"writer's; free some space, then biafc repair {self.path}"
-            )
+            self.broken = not_closed(self.path, exc)
             raise StudyFileError(self.broken) from None
 
 

@@ -26,6 +26,7 @@ from daq.store.recover import clear_consistency_flags
 from daq.store.resume_check import bench_differences
 from protocols.bench import BenchFile
 from protocols.legacy import upgrade_protocol_text
+from protocols.one_line import first_line
 from protocols.runfile import ChainInfo, RunFileWriter, ScanSpec
 from protocols.schema import ProtocolFile, parse_protocol
 from protocols.yamlfile import ConfigError
@@ -248,7 +249,7 @@ def check_resume(
     except RunFileError as exc:  # names the file
         raise StoreError(f"--resume: {str(exc).splitlines()[0]}") from None
     except (OSError, KeyError, ValueError, TypeError) as exc:  # h5py's, inside the file
-        why = (str(exc).strip("'\"").splitlines() or [type(exc).__name__])[0]
+        why = first_line(exc)
         raise StoreError(f"--resume: {path}: damaged HDF5 file, cannot be read ({why})") from None
     text = {"protocol_yaml": protocol_yaml, "bench_yaml": bench_yaml}
     if (status.decode() if isinstance(status, bytes) else str(status)) == "complete":
