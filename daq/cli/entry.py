@@ -15,6 +15,8 @@ import signal
 import sys
 from types import FrameType
 
+from daq.cli.stop_signals import stop_signals
+
 __all__ = ["run_protocol"]
 
 _PROG = "run_protocol"
@@ -33,9 +35,7 @@ def _before_start(signum: int, frame: FrameType | None) -> None:
     os._exit(130 if signum == signal.SIGINT else 128 + signum)
 
 
-_SIGNALS = [signal.SIGINT, signal.SIGTERM]
-if hasattr(signal, "SIGHUP") and signal.getsignal(signal.SIGHUP) is not signal.SIG_IGN:
-    _SIGNALS.append(signal.SIGHUP)  # the terminal closed; ignored under nohup: left so
+_SIGNALS = stop_signals()  # SIGHUP too, unless ignored (nohup)
 for _sig in _SIGNALS:
     signal.signal(_sig, _before_start)
 

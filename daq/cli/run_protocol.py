@@ -32,6 +32,7 @@ from types import FrameType
 from typing import Any, TextIO
 
 from daq.cli.biafc import CliError
+from daq.cli.stop_signals import stop_signals
 
 __all__ = ["add_arguments", "main", "run"]
 
@@ -180,16 +181,6 @@ class _Interrupted(KeyboardInterrupt):
 #: flight, homing, a DEM being compiled); then it is interrupted where it is, and the safe
 #: state follows at once
 ABORT_BOUND_S = 5.0
-
-
-def stop_signals() -> tuple[int, ...]:
-    """The signals that stop a run: SIGINT, SIGTERM and, where there is one and it is not
-    ignored, SIGHUP (the terminal closed, or the ssh link to it dropped). Under ``nohup``
-    SIGHUP is ignored: the run goes on, as ``nohup`` promises."""
-    hup: int | None = getattr(signal, "SIGHUP", None)
-    if hup is None or signal.getsignal(hup) is signal.SIG_IGN:
-        return (signal.SIGINT, signal.SIGTERM)
-    return (signal.SIGINT, signal.SIGTERM, hup)
 
 
 def _leave_the_terminal() -> None:
