@@ -30,8 +30,8 @@ from daq.store.lock import FileInUse, RunFileLock
 
 __all__ = ["InstrumentInUse", "InstrumentLocks", "lock_instruments"]
 
-#: this process's held locks: lock path -> connections that hold it
-_HELD: dict[Path, int] = {}
+#: this process's held locks: lock path -> the lock and the connections that hold it
+_HELD: dict[Path, tuple[RunFileLock, int]] = {}
 _GUARD = threading.Lock()
 
 
@@ -57,11 +57,10 @@ class _InstrumentLock(RunFileLock):
 def _drop(path: Path) -> None:
     """One connection of this process lets ``path`` go; the last removes the lock file.
     Call with ``_GUARD`` held."""
-    _HELD[path] -= 1
-    if _HELD[path] == 0:
-        del _HELD[path]
-        lock = RunFileLock(path)
-        lock.held = True  # taken by this process (release() checks the PID in the file)
+    lock, count = _HELD.pop(path)
+    if count > 1:
+        _HELD[path] = (lock, count - 1)
+    else:
         lock.release()
 
 
@@ -105,13 +104,15 @@ def lock_instruments(addresses: dict[str, str]) -> InstrumentLocks:
         try:
             for role, address in addresses.items():
                 path = folder / _name(address)
-                if path not in _HELD:
+                if path in _HELD:
+                    lock, count = _HELD[path]
+                else:
+                    lock, count = _InstrumentLock(path, f"the {role} {address}"), 0
                     try:
-                        _InstrumentLock(path, f"the {role} {address}").acquire()
+                        lock.acquire()
                     except FileInUse as exc:
                         raise InstrumentInUse(str(exc)) from None
-                    _HELD[path] = 0
-                _HELD[path] += 1
+                _HELD[path] = (lock, count + 1)
                 taken.append(path)
         except BaseException:
             locks._released = True
