@@ -253,12 +253,14 @@ class StudyStore:
             written = []
             for name, arr in result.metrics.items():
                 if name in self.f["metrics"]:
-                    written.append(self.f["metrics"][name])
-                    written[-1][sel] = np.asarray(arr)[order]
+                    ds = self.f["metrics"][name]
+                    ds[sel] = np.asarray(arr)[order]
+                    written.append(ds)
             for d, arr in result.spectra.items():
                 if "spectra" in self.f and d in self.f["spectra"]:
-                    written.append(self.f["spectra"][d])
-                    written[-1][sel] = np.asarray(arr)[order]
+                    ds = self.f["spectra"][d]
+                    ds[sel] = np.asarray(arr)[order]
+                    written.append(ds)
             for cell, msg in result.messages.items():
                 self.f["cells/message"][int(cell)] = msg
             self.f["tasks/wall_s"][task] = result.wall_s

@@ -54,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
         stored_names,
         task_cells,
     )
-    from daq.store.disk_space import MARGIN_BYTES, free_bytes
+    from daq.store.disk_space import no_margin
     from daq.store.lock import FileInUse, RunFileLock
     from protocols.study import cell_table, load_study
     from protocols.studyfile import StudyFileError, StudyStore
@@ -85,12 +85,9 @@ def run(args: argparse.Namespace) -> int:
     if args.dry_run:
         _announce(study, table, tasks, out)
         return 0
-    free = free_bytes(out)
-    if free is not None and free < MARGIN_BYTES:  # an output made on a full disk is unreadable
-        raise CliError(
-            f"{out}: its disk has {free / 2**20:.3g} MB free; a study keeps "
-            f"{MARGIN_BYTES / 2**20:g} MB to spare: free some space or write the output elsewhere"
-        )
+    short = no_margin(out)  # an output made on a full disk may be unreadable
+    if short is not None:
+        raise CliError(short)
     lock = RunFileLock(out)
     try:
         lock.acquire()

@@ -27,6 +27,7 @@ __all__ = [
     "MARGIN_BYTES",
     "DiskFull",
     "free_bytes",
+    "no_margin",
     "point_bytes",
     "room_for_a_point",
     "room_for_a_task",
@@ -78,6 +79,19 @@ def shortfall(path: str | Path, n_points: int, samples: int) -> str | None:
         f"{path}: {n_points:,} point(s) need {_mb(need)} ({n_points:,} x {samples:,} samples x 2 "
         f"channels x 4 bytes, and {_mb(MARGIN_BYTES)} to spare) but its disk has {_mb(free)} "
         "free; free some space or write the run elsewhere"
+    )
+
+
+def no_margin(path: str | Path) -> str | None:
+    """Why no output should be started on the disk of ``path``: less than
+    :data:`MARGIN_BYTES` free (one line), else ``None``. HDF5 may leave a file it creates on a
+    full disk unreadable (a design study's output, whose size is not known before)."""
+    free = free_bytes(path)
+    if free is None or free >= MARGIN_BYTES:
+        return None
+    return (
+        f"{path}: its disk has {_mb(free)} free, and {_mb(MARGIN_BYTES)} are kept to spare: "
+        "free some space or write the output elsewhere"
     )
 
 
