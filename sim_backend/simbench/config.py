@@ -87,6 +87,9 @@ class SimWorldConfig:
         Integrator step (s) or ``None`` for the integrator's default.
     dem_cache_size:
         How many DEM runs the cache keeps.
+    dem_cache_MB:
+        The most megabytes (2**20 bytes) of DEM runs the cache keeps (the newest whatever its
+        size): a run holds every cylinder's velocity over the window.
     """
 
     chain_spec: Any = None
@@ -113,7 +116,8 @@ class SimWorldConfig:
     dem_sample_rate_Hz: float | None = None
     dem_integrator: str = "default"
     dem_dt_s: float | None = None
-    dem_cache_size: int = 64
+    dem_cache_size: int = 1024
+    dem_cache_MB: float = 512.0
 
     def __post_init__(self) -> None:
         self._check_direction_channel()
@@ -146,6 +150,7 @@ class SimWorldConfig:
             "max_rate_Hz",
             "timebase_Hz",
             "dem_duration_s",
+            "dem_cache_MB",
         )
         non_negative = (
             "first_cylinder_m",

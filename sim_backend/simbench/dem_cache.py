@@ -2,8 +2,12 @@
 
 The world asks :class:`DemRunner` for the chain's response to what the generator played. A run
 is keyed by everything that changes the physics (direction, actuator kind, peak drive, the exact
-waveform samples and their rate, the window and the output rate), kept in a small LRU cache, and
+waveform samples and their rate, the window and the output rate), kept in a bounded cache, and
 timed, so the benchmark can split DEM seconds from the software around it.
+
+The cache is bounded by its count of runs and by their bytes (:data:`CACHE_BYTES`): a record
+holds every cylinder's velocity over the window (31 cylinders x 25 ms at 500 kS/s: 3.2 MB; 1 s
+at 1 MS/s: 250 MB), so a count alone let a sweep of long windows hold gigabytes.
 """
 
 from __future__ import annotations
@@ -18,7 +22,10 @@ from typing import Any, Literal, cast
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["DemKey", "DemRecord", "DemRunner", "DemStats", "waveform_digest"]
+__all__ = ["CACHE_BYTES", "DemKey", "DemRecord", "DemRunner", "DemStats", "waveform_digest"]
+
+#: the most bytes of DEM records the cache keeps (the newest record is kept whatever its size)
+CACHE_BYTES = 512 * 2**20
 
 
 @dataclass(frozen=True)
@@ -59,6 +66,11 @@ class DemRecord:
     drive: NDArray[np.float64]
     meta: dict[str, Any] = field(default_factory=dict)
 
+    @property
+    def nbytes(self) -> int:
+        """Bytes of the record's arrays."""
+        return int(self.time_s.nbytes + self.velocity_m_per_s.nbytes + self.drive.nbytes)
+
 
 @dataclass
 class DemStats:
@@ -82,12 +94,19 @@ Simulator = Callable[[DemKey, NDArray[np.float64]], DemRecord]
 
 
 class DemRunner:
-    """Runs the DEM on demand and caches the records (least recently used out first)."""
+    """Runs the DEM on demand and caches the records, at most ``cache_size`` of them and
+    ``cache_bytes`` bytes of them. The newest record is always kept (even alone above the
+    bound: every cylinder and average of one drive use it); beyond the bounds the most recently
+    used of the others goes first (:meth:`_evictable`)."""
 
-    def __init__(self, simulator: Simulator, cache_size: int = 64) -> None:
+    def __init__(
+        self, simulator: Simulator, cache_size: int = 1024, cache_bytes: int = CACHE_BYTES
+    ) -> None:
         self._simulate = simulator
         self._cache: OrderedDict[DemKey, DemRecord] = OrderedDict()
         self._size = cache_size
+        self._max_bytes = cache_bytes
+        self._bytes = 0
         self.stats = DemStats()
         self._served: dict[DemKey, dict[str, Any]] = {}
 
@@ -104,10 +123,22 @@ class DemRunner:
         self.stats.dem_s += time.perf_counter() - t0
         self.stats.calls += 1
         self._cache[key] = rec
-        while len(self._cache) > self._size:
-            self._cache.popitem(last=False)
+        self._bytes += rec.nbytes
+        while len(self._cache) > 1 and (
+            len(self._cache) > self._size or self._bytes > self._max_bytes
+        ):
+            self._bytes -= self._cache.pop(self._evictable()).nbytes
         self._note_served(key, rec)
         return rec
+
+    def _evictable(self) -> DemKey:
+        """The most recently used record but the newest. A sweep whose drives come back in a
+        cycle longer than the cache (cylinder the outer loop: every drive once per cylinder)
+        then keeps a stable set and hits it; least recently used out first would drop each
+        record just before its next use and miss every time."""
+        newest_first = reversed(self._cache)
+        next(newest_first)
+        return next(newest_first)
 
     def _note_served(self, key: DemKey, rec: DemRecord) -> None:
         if rec.meta and key not in self._served:
@@ -129,6 +160,12 @@ class DemRunner:
 
     def clear(self) -> None:
         self._cache.clear()
+        self._bytes = 0
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes of the records the cache holds now."""
+        return self._bytes
 
     def __len__(self) -> int:
         return len(self._cache)

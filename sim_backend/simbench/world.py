@@ -133,6 +133,7 @@ class SimWorld:
             if simulator is not None
             else dem_simulator(cfg.chain_spec, cfg.dem_integrator, cfg.dem_dt_s),
             cache_size=cfg.dem_cache_size,
+            cache_bytes=round(cfg.dem_cache_MB * 2**20),
         )
         self.n_acquisitions = 0
         self.n_triggers = 0

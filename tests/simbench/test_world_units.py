@@ -310,3 +310,46 @@ def test_vibrometer_signal_loss_fault() -> None:
     world.faults.clear()
     good = acquire(world, [play(vpp=10.0)])
     assert np.max(np.abs(good.velocity_V)) > 10 * np.std(acq.velocity_V)
+
+
+def test_dem_cache_is_bounded_by_bytes_not_only_by_count() -> None:
+    """A sweep of long windows: each record 11.2 MB (5 cylinders x 200,000 samples, the time and
+    the drive); 20 distinct drives with a 64-record, 32 MB cache keep the newest two (before,
+    all 20: 224 MB)."""
+    from sim_backend.simbench.dem_cache import DemRunner
+
+    runner = DemRunner(fake_dem, cache_size=64, cache_bytes=32 * 2**20)
+    keys = [DemKey("ltr", "displacement", 1e-7 * (i + 1), "w", 1e6, 0.2, 1e6) for i in range(20)]
+    for key in keys:
+        rec = runner.record(key, np.zeros(4))
+        assert rec.nbytes == 11_200_000
+    assert len(runner) == 2 and runner.nbytes <= 32 * 2**20
+    assert runner.record(keys[-1], np.zeros(4)) is rec  # the newest is a hit
+    assert runner.stats.calls == 20 and runner.stats.cache_hits == 1
+    # one record above the bound alone is still kept: the cylinders of one drive share it
+    alone = DemRunner(fake_dem, cache_bytes=1)
+    first = alone.record(keys[0], np.zeros(4))
+    assert alone.record(keys[0], np.zeros(4)) is first and len(alone) == 1
+
+
+def test_world_config_bounds_the_dem_cache_in_megabytes() -> None:
+    world = make_world(dem_cache_MB=1.5)
+    assert world._dem._max_bytes == round(1.5 * 2**20)
+    with pytest.raises(ValueError, match="dem_cache_MB"):
+        SimWorldConfig(dem_cache_MB=0)
+
+
+def test_dem_cache_hits_a_cycle_of_drives_longer_than_itself() -> None:
+    """Cylinder the outer loop of a sweep: 10 drives measured in turn on each of 5 cylinders,
+    with room for 4 records. Least recently used out first dropped every record just before its
+    next use (50 DEM runs, no hit); keeping a stable set, at least 3 of the 10 hit on each later
+    pass (15 of 40 in all)."""
+    from sim_backend.simbench.dem_cache import DemRunner
+
+    runner = DemRunner(fake_dem, cache_size=4)
+    keys = [DemKey("rtl", "displacement", 1e-7 * (i + 1), "w", 1e6, 2e-3, 1e6) for i in range(10)]
+    for _cylinder in range(5):
+        for key in keys:
+            runner.record(key, np.zeros(4))
+    assert runner.stats.cache_hits >= 4 * 3
+    assert runner.stats.calls + runner.stats.cache_hits == 50
