@@ -67,6 +67,7 @@ from numpy.typing import NDArray
 
 from protocols.finish_open import not_closed, open_to_finish
 from protocols.hdf5probe import HDF5ProbeError, probe_hdf5
+from protocols.left_open import leave_open
 from protocols.one_line import first_line
 from protocols.recover import ClearedView, has_consistency_flags
 from protocols.swmr_read import open_swmr
@@ -403,6 +404,7 @@ class RunFileWriter:
                 f"as a killed writer's; free some space, then run_protocol --resume {self.path} "
                 f"(or biafc repair {self.path} to read it as it is)"
             )
+            leave_open(self.path)
             raise RunFileError(self.broken) from None
         g["measured_at"][amplitude_index, cylinder_index] = (
             time.time() if measured_at is None else measured_at
@@ -460,6 +462,7 @@ class RunFileWriter:
                         sim.attrs[key] = value
         except (OSError, RuntimeError) as exc:
             self.broken = not_closed(self.path, exc)
+            leave_open(self.path)
             raise RunFileError(self.broken) from None
 
     @property

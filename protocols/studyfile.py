@@ -43,6 +43,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from protocols.finish_open import not_closed, open_to_finish
+from protocols.left_open import leave_open
 from protocols.one_line import first_line
 from protocols.study import METRICS, PARAMETERS, CellTable
 from protocols.studyformat import FORMAT, FORMAT_VERSION, StudyFileError
@@ -277,6 +278,7 @@ class StudyStore:
                 f"a killed writer's; free some space, then biafc repair {self.path} and run "
                 "the study again to continue"
             )
+            leave_open(self.path)
             raise StudyFileError(self.broken) from None
 
     def close(self, status: str) -> None:
@@ -292,6 +294,7 @@ class StudyStore:
                 f.attrs["status"] = status
         except (OSError, RuntimeError) as exc:
             self.broken = not_closed(self.path, exc)
+            leave_open(self.path)
             raise StudyFileError(self.broken) from None
 
 

@@ -26,3 +26,13 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     for item in items:
         if "hardware" in item.keywords:
             item.add_marker(skip)
+
+
+@pytest.fixture(autouse=True)
+def _no_file_left_open_across_tests(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A test whose writer gave up on its file (a faked full disk) marks this process as one
+    that must end without HDF5's clean-up (:mod:`protocols.left_open`); the next test's
+    in-process CLI would then end pytest itself. Each test starts with none."""
+    from protocols import left_open
+
+    monkeypatch.setattr(left_open, "_LEFT", [])

@@ -276,6 +276,7 @@ def _execute(
 
     from daq.engine.outcome import ExitCode, exit_code, final_line
     from daq.logsetup import attach_run_log, detach
+    from protocols.left_open import exit_leaving_them, files_left_open
 
     log = logging.getLogger("biafc.run_protocol")
     log_file = attach_run_log(out)  # RUN.log beside the run file: everything from INFO up
@@ -329,8 +330,8 @@ def _execute(
         print(line, file=sys.stdout if code == ExitCode.COMPLETE else sys.stderr, flush=True)
     except OSError:  # the terminal is gone (SIGHUP ignored): the log file has the line
         _leave_the_terminal()
-    if engine.file_broken:  # HDF5 crashed the process closing such a file at its exit (139)
-        os._exit(int(code))
+    if files_left_open():  # HDF5's clean-up crashes the process at its exit (139)
+        exit_leaving_them(int(code))
     return int(code)
 
 

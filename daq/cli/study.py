@@ -129,6 +129,7 @@ def _run(args: argparse.Namespace, setup: Any, table: Any, store: Any) -> int:
     from daq.progress import ProgressDisplay
     from daq.store.disk_space import DiskFull
     from daq.study_runner import dask_client, run_study
+    from protocols.left_open import exit_leaving_them
     from protocols.studyfile import StudyFileError
 
     done0 = int(store.done().sum())
@@ -166,7 +167,7 @@ def _run(args: argparse.Namespace, setup: Any, table: Any, store: Any) -> int:
             pass  # store.broken says why
         if store.broken is not None:  # a full disk: the output is left as a killed writer's
             print(f"biafc study: failed: {store.broken}", file=sys.stderr, flush=True)
-            os._exit(1)  # HDF5 crashed the process closing such a file at its exit
+            exit_leaving_them(1)  # HDF5's clean-up crashes a process that left such a file
     if error is not None:
         first = str(error).splitlines()[0] if str(error) else ""
         if isinstance(error, DiskFull):

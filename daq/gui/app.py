@@ -75,6 +75,7 @@ def run_window(args: argparse.Namespace) -> int:
 
     from daq.gui.main_window import MainWindow
     from daq.logsetup import configure, verbosity
+    from protocols.left_open import exit_leaving_them, files_left_open
 
     configure(verbosity(args))
     app = QApplication.instance() or QApplication(sys.argv[:1])
@@ -85,7 +86,10 @@ def run_window(args: argparse.Namespace) -> int:
     if args.connect:
         win.connect_bench()
     win.show()
-    return int(app.exec())
+    code = int(app.exec())
+    if files_left_open():  # a failed write on a full disk: HDF5's clean-up crashes the exit
+        exit_leaving_them(code)
+    return code
 
 
 def main(argv: Sequence[str] | None = None) -> int:

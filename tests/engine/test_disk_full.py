@@ -26,6 +26,7 @@ from daq.engine.outcome import ExitCode
 from daq.request import RequestError, validate_request
 from daq.store import disk_space
 from daq.store.repair import repair_run
+from protocols.left_open import files_left_open
 from protocols.runfile import PointState, read_run
 
 from .fakes import FakeWorld, fake_bench
@@ -116,6 +117,7 @@ def test_a_records_write_that_fails_leaves_the_point_pending_and_the_file_alone(
     assert res.status == "failed" and res.safe_state_s is not None
     assert "ltr amplitude #1 cylinder #3 could not be written" in res.reason
     assert "biafc repair" in res.reason and eng.file_broken == res.reason
+    assert files_left_open() == (str(out),)  # the process must end without HDF5's clean-up
     monkeypatch.setattr(h5py.Dataset, "flush", real_flush)
     del eng  # the file as a killed writer leaves it: flags set, still 'running'
     report = repair_run(out)

@@ -21,6 +21,7 @@ from analysis.study_cells import TaskResult
 from daq.cli.biafc import main
 from daq.store import disk_space
 from daq.store.repair import repair_run
+from protocols.left_open import files_left_open
 from protocols.study import cell_table, load_study
 from protocols.studyfile import StudyFileError, StudyStore, read_study
 
@@ -95,6 +96,7 @@ def test_a_task_whose_write_fails_is_not_marked_and_the_output_is_left_for_repai
         store.write_task(2, task([6, 7, 8]))  # no more writes once broken
     store.close("failed")  # leaves the file alone, as a killed writer would
     assert store.f.id.valid
+    assert files_left_open() == (str(out),)  # the process must end without HDF5's clean-up
     store.f.close()
     report = repair_run(out)
     after = read_study(out)
