@@ -182,6 +182,11 @@ class _Interrupted(KeyboardInterrupt):
 #: state follows at once
 ABORT_BOUND_S = 5.0
 
+#: a closing console window (Windows): Windows ends the process about 5 s after it tells it, so
+#: the abort is forced after this long (s) and the handler gives up at :data:`CLOSE_BOUND_S`
+CLOSE_GRACE_S = 2.0
+CLOSE_BOUND_S = 4.5
+
 
 def _leave_the_terminal() -> None:
     """After SIGHUP: the terminal is gone, and a write to it could fail or block the abort. The
@@ -209,12 +214,19 @@ class _SignalGate:
     def __init__(self) -> None:
         self.engine: Any = None
         self.interrupted: list[str] = []
+        #: set once a run's outcome is in its log and file (what a closing console waits for)
+        self.outcome_written = threading.Event()
+        self.ran = False  # an engine was made: the bench may be driven
         self._watchdog: threading.Timer | None = None
         self._forced = False
         self._old: dict[int, Any] = {}
+        self._console: Any = None
 
     def install(self) -> _SignalGate:
+        from daq.cli.console_close import hold_console_close
+
         self._old = {s: signal.signal(s, self) for s in stop_signals()}
+        self._console = hold_console_close(self.console_closed)  # Windows only
         return self
 
     def restore(self) -> None:
@@ -223,6 +235,27 @@ class _SignalGate:
         for s, h in self._old.items():
             signal.signal(s, h)
         self._old = {}
+        if self._console is not None:
+            self._console.remove()
+            self._console = None
+
+    def console_closed(self, what: str) -> None:
+        """Windows' handler thread, the console window closing (or a log-off, a shutdown):
+        Windows ends the process when this returns, or after about 5 s. As SIGHUP: the output
+        to the null device and the run aborted; then wait until its outcome is written, the
+        abort forced after :data:`CLOSE_GRACE_S`, for :data:`CLOSE_BOUND_S` in all."""
+        _leave_the_terminal()
+        if not self.ran:
+            return  # nothing driven yet: nothing to put in a safe state
+        self.interrupted.append(what)
+        engine = self.engine
+        if engine is not None and not engine.ending:
+            engine.abort(f"interrupted: {what}")
+        if not self.outcome_written.wait(CLOSE_GRACE_S):
+            engine = self.engine
+            if engine is not None and not engine.ending:
+                self._force()
+            self.outcome_written.wait(CLOSE_BOUND_S - CLOSE_GRACE_S)
 
     def _force(self) -> None:
         self._forced = True
@@ -302,6 +335,7 @@ def _execute(
             )
             return int(ExitCode.INTERRUPTED if str(exc) == "SIGINT" else ExitCode.FAILED)
         engine = gate.engine
+        gate.ran = True
         engine.subscribe(Progress(sys.stdout, quiet))
         try:
             try:
@@ -326,6 +360,7 @@ def _execute(
         logging.INFO if code == ExitCode.COMPLETE else logging.ERROR, "%s (exit %d)", line, code
     )
     detach(log_file)
+    gate.outcome_written.set()
     try:
         print(line, file=sys.stdout if code == ExitCode.COMPLETE else sys.stderr, flush=True)
     except OSError:  # the terminal is gone (SIGHUP ignored): the log file has the line
