@@ -31,6 +31,7 @@ from daq.gui.adapter import EngineEventAdapter
 from daq.gui.background import BackgroundCall
 from daq.gui.live_data import LiveData
 from daq.gui.panels import BenchPanel, LogView, ProtocolPanel, RunPanel, format_duration
+from daq.gui.redraw_pace import FASTEST_MS, RedrawPace
 from daq.gui.views import LiveViews
 
 __all__ = ["Assembler", "MainWindow"]
@@ -38,8 +39,9 @@ __all__ = ["Assembler", "MainWindow"]
 #: builds the instruments of a bench file (default: :func:`daq.connect.connect_bench`)
 Assembler = Callable[[Any, "int | None"], Any]
 
-#: ms between redraws of the live views while events arrive
-REDRAW_MS = 100
+#: ms between redraws of the live views while events arrive, at the fastest (slower while
+#: drawing takes most of the window's time: :mod:`daq.gui.redraw_pace`)
+REDRAW_MS = FASTEST_MS
 
 
 def _default_assembler(bf: Any, seed: int | None) -> Any:
@@ -113,6 +115,7 @@ class MainWindow(QMainWindow):
         self._build()
         self._redraw_timer = QTimer(self)
         self._redraw_timer.setInterval(REDRAW_MS)
+        self._pace = RedrawPace()
         self._redraw_timer.timeout.connect(self._redraw_if_dirty)
         self._redraw_timer.start()
         self.load_bench(bench_path)
@@ -632,6 +635,9 @@ class MainWindow(QMainWindow):
         self.run_finished.emit(status)
 
     def _redraw_if_dirty(self) -> None:
+        interval = self._pace.tick()
+        if interval != self._redraw_timer.interval():
+            self._redraw_timer.setInterval(interval)
         if self._dirty:
             self._redraw()
 
