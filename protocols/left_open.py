@@ -6,8 +6,8 @@ fault" on the terminal), whatever Python did before. A writer that gives up on i
 (:class:`protocols.runfile.RunFileWriter`, :class:`protocols.studyfile.StudyStore`) therefore
 names it to :func:`leave_open`, and a program that ends (the CLIs, the bench window) asks
 :func:`files_left_open` and ends through :func:`exit_leaving_them`: its logs flushed, its exit
-status its own, HDF5's clean-up skipped. The file is then as a killed writer leaves it, for
-``run_protocol --resume`` or ``biafc repair``.
+status its own, Python's exit handlers run, HDF5's clean-up skipped. The file is then as a
+killed writer leaves it, for ``run_protocol --resume`` or ``biafc repair``.
 
 The handle itself is not kept: once released, the same process can open the file again (the
 bench window can show what was measured, ``biafc repair`` can run in it); h5py reports the
@@ -17,6 +17,7 @@ whether or not it was released.
 
 from __future__ import annotations
 
+import atexit
 import logging
 import os
 import sys
@@ -42,9 +43,14 @@ def files_left_open() -> tuple[str, ...]:
 
 
 def exit_leaving_them(code: int) -> NoReturn:
-    """End the process with ``code`` without HDF5's clean-up: logging shut down (its files
-    flushed and closed) and the standard streams flushed first."""
-    logging.shutdown()
+    """End the process with ``code`` without HDF5's clean-up. Python's own ``atexit`` handlers
+    run first (logging's shutdown, which flushes and closes the log files; the stability
+    verdicts written to the cache), then the standard streams are flushed: HDF5's clean-up is
+    the C library's, after them, and is what is skipped."""
+    run_exit_handlers = getattr(atexit, "_run_exitfuncs", None)  # CPython's, since Python 2
+    if run_exit_handlers is not None:
+        run_exit_handlers()
+    logging.shutdown()  # where the above is missing; a second call changes nothing
     for stream in (sys.stdout, sys.stderr):
         try:
             stream.flush()

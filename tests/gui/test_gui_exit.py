@@ -40,7 +40,9 @@ def _args() -> argparse.Namespace:
 
 @pytest.fixture
 def window(qapp: Any, monkeypatch: pytest.MonkeyPatch) -> list[int]:
-    """The window stubbed, Qt's event loop returning 3 at once, ``os._exit`` recorded."""
+    """The window stubbed, Qt's event loop returning 3 at once, the exit without HDF5's
+    clean-up recorded (run for real, it would run this process's exit handlers: h5py's among
+    them)."""
     import daq.gui.main_window as main_window
 
     ended: list[int] = []
@@ -51,7 +53,7 @@ def window(qapp: Any, monkeypatch: pytest.MonkeyPatch) -> list[int]:
 
     monkeypatch.setattr(main_window, "MainWindow", _Window)
     monkeypatch.setattr(type(qapp), "exec", lambda self: 3)
-    monkeypatch.setattr(left_open.os, "_exit", _exit)
+    monkeypatch.setattr(left_open, "exit_leaving_them", _exit)
     monkeypatch.setattr("daq.logsetup.configure", lambda *a, **k: None)
     return ended
 
