@@ -65,6 +65,7 @@ import h5py
 import numpy as np
 from numpy.typing import NDArray
 
+from protocols.damaged_records import bad_points
 from protocols.finish_open import not_closed, open_to_finish
 from protocols.hdf5probe import HDF5ProbeError, probe_hdf5
 from protocols.left_open import leave_open
@@ -77,6 +78,7 @@ __all__ = [
     "FORMAT",
     "FORMAT_VERSION",
     "ChainInfo",
+    "DamagedRecordsError",
     "PointState",
     "RunData",
     "RunFileError",
@@ -110,6 +112,11 @@ class PointState:
 
 class RunFileError(ValueError):
     """The file is not a biafc run file, or not one this version reads."""
+
+
+class DamagedRecordsError(RunFileError):
+    """Records of some points fail their checksum (damaged on disk); the rest of the file
+    reads. ``biafc repair`` clears them (:mod:`protocols.damaged_records`)."""
 
 
 def software_version() -> str:
@@ -412,6 +419,20 @@ class RunFileWriter:
         g["done"][amplitude_index, cylinder_index] = PointState.DONE
         self._f.flush()
 
+    def clear_point(self, direction: str, amplitude_index: int, cylinder_index: int) -> None:
+        """Empty one point (0-based indices): its records NaN (written whole, so a chunk that
+        failed its checksum is replaced, not read), ``done`` pending, ``measured_at`` NaN;
+        flushed. For records damaged on disk (:mod:`protocols.damaged_records`)."""
+        self._check_usable()
+        g = self._f["scan"][direction]
+        for name in ("velocity", "drive"):
+            ds = g[name]
+            ds[amplitude_index, cylinder_index, :] = np.full(ds.shape[2], np.nan, np.float32)
+            ds.flush()
+        g["measured_at"][amplitude_index, cylinder_index] = np.nan
+        g["done"][amplitude_index, cylinder_index] = PointState.PENDING
+        self._f.flush()
+
     def mark_failed(self, direction: str, amplitude_index: int, cylinder_index: int) -> None:
         """Mark a point that failed after its retries (``done`` = 2) and flush."""
         self._check_usable()
@@ -683,19 +704,17 @@ def _read_records(path: Path, direction: str, g: h5py.Group, name: str) -> np.nd
         error = exc
     amps, cyls = g["amplitudes"][...], g["cylinders"][...]
     units = str(g["amplitudes"].attrs.get("units", ""))
-    bad: list[str] = []
-    for a in range(ds.shape[0]):
-        for c in range(ds.shape[1]):
-            try:
-                ds[a, c]
-            except OSError:
-                bad.append(f"amplitude #{a + 1} ({amps[a]:g} {units}) cylinder {int(cyls[c])}")
+    bad = [
+        f"amplitude #{a + 1} ({amps[a]:g} {units}) cylinder {int(cyls[c])}"
+        for a, c in bad_points(ds)
+    ]
     if not bad:
         raise error  # every point reads alone: some other damage (one_line_errors)
     listed = "; ".join(bad[:4]) + (f"; and {len(bad) - 4} more" if len(bad) > 4 else "")
-    raise RunFileError(
+    raise DamagedRecordsError(
         f"{path}: {name} records of {len(bad)} {direction} point(s) fail their checksum "
-        f"(damaged on disk; the other points are intact): {listed}"
+        f"(damaged on disk; the other points are intact): {listed}; biafc repair {path} "
+        "clears them, and run_protocol --resume then measures them again"
     )
 
 

@@ -26,7 +26,14 @@ from daq.store.process_check import process_alive
 from daq.store.run_store import StoreError
 from protocols.outputfile import read_output
 from protocols.recover import clear_consistency_flags, has_consistency_flags
-from protocols.runfile import PointState, RunData, RunFileError, RunFileWriter, read_run
+from protocols.runfile import (
+    DamagedRecordsError,
+    PointState,
+    RunData,
+    RunFileError,
+    RunFileWriter,
+    read_run,
+)
 from protocols.studyfile import StudyData, StudyFileError, read_study
 
 __all__ = ["RepairReport", "repair_run"]
@@ -111,21 +118,21 @@ def repair_run(path: str | Path) -> RepairReport:
         raise StoreError(str(exc)) from None
     try:
         actions = [lock.stale_note] if lock.stale_note else []
-        try:  # one open of the file: a damaged one waits its grace once (protocols.outputfile)
-            data = read_output(path, spectra=False)
-        except StudyFileError as exc:
-            raise StoreError(f"{path} is not a readable biafc study output ({exc})") from None
-        except (OSError, RunFileError) as exc:
-            raise StoreError(f"{path} is not a readable biafc run file ({exc})") from None
+        status_first = None
+        try:
+            data = _read(path)
+        except DamagedRecordsError:  # points damaged on disk: cleared, to be measured again
+            status_first = _clear_damaged_records(path, actions)
+            data = _read(path)
         if isinstance(data, StudyData):
             return _repair_study(path, data, actions)
         before_counts = _run_counts(data)
-        status_before = data.status
+        status_before = status_first or data.status
         if has_consistency_flags(path):
             if clear_consistency_flags(path):
                 actions.append("cleared the open-for-write flags of a killed writer")
-        status_after = status_before
-        if status_before == "running":
+        status_after = data.status
+        if data.status == "running":
             try:
                 writer = RunFileWriter.open_existing(path, swmr=False)
             except (OSError, RuntimeError) as exc:
@@ -165,6 +172,36 @@ def _study_counts(data: StudyData) -> tuple[int, int, int]:
     n_failed = int(np.sum(status == STATUS_FAILED))
     n_pending = int(np.sum(status == 0))
     return status.size - n_failed - n_pending, n_failed, n_pending
+
+
+def _read(path: Path) -> RunData | StudyData:
+    """The whole file, once (a damaged one waits its grace once: protocols.outputfile); one
+    line when it does not read, but records damaged on disk
+    (:class:`~protocols.runfile.DamagedRecordsError`) pass."""
+    try:
+        return read_output(path, spectra=False)
+    except DamagedRecordsError:
+        raise
+    except StudyFileError as exc:
+        raise StoreError(f"{path} is not a readable biafc study output ({exc})") from None
+    except (OSError, RunFileError) as exc:
+        raise StoreError(f"{path} is not a readable biafc run file ({exc})") from None
+
+
+def _clear_damaged_records(path: Path, actions: list[str]) -> str:
+    """Clear the points of run file ``path`` whose records fail their checksum
+    (:mod:`protocols.damaged_records`), after clearing a killed writer's flags (each noted in
+    ``actions``). Returns the file's status before."""
+    from protocols.damaged_records import clear_damaged_points, damaged_points
+
+    damaged = damaged_points(path)
+    if has_consistency_flags(path) and clear_consistency_flags(path):
+        actions.append("cleared the open-for-write flags of a killed writer")
+    with h5py.File(path, "r") as f:
+        status = str(f.attrs.get("status", ""))
+    line = clear_damaged_points(path, damaged)
+    actions.append(line.removeprefix("repaired: "))
+    return status
 
 
 def _repair_study(path: Path, data: StudyData, actions: list[str]) -> RepairReport:

@@ -114,3 +114,62 @@ def test_resume_refuses_a_killed_run_whose_records_are_damaged(tmp_path: Path) -
     assert len(lines) == 1 and "cannot be continued" in lines[0], res.stderr
     assert "velocity records of 1 ltr point(s) fail their checksum" in lines[0]
     assert "amplitude #1 (1 V) cylinder 1" in lines[0]
+
+
+def test_repair_clears_the_damaged_points_of_a_complete_file(run_file: Path) -> None:
+    """Before, ``biafc repair`` refused the file ("not a readable biafc run file"), and so did
+    ``biafc figures`` and, the run being complete, ``--resume``: one damaged point took the
+    others with it."""
+    from daq.store.repair import repair_run
+
+    good = read_run(run_file).scans["ltr"]
+    _damage(run_file, "velocity", 1, 2)
+    report = repair_run(run_file)
+    assert report.status_before == "complete" and report.status_after == "aborted"
+    assert (report.n_done, report.n_failed, report.n_pending) == (5, 0, 1)
+    assert "1 point(s) whose records failed their checksum" in report.line()
+    assert "ltr amplitude #2 (2e-06 m) cylinder 31" in report.line()
+    run = read_run(run_file)  # reads again
+    s = run.scans["ltr"]
+    assert s.done[1, 2] == 0 and np.isnan(s.measured_at[1, 2])
+    assert np.isnan(s.velocity[1, 2]).all() and np.isnan(s.drive[1, 2]).all()
+    kept = np.ones((2, 3), bool)
+    kept[1, 2] = False
+    assert np.array_equal(s.velocity[kept], good.velocity[kept])
+    assert any("run_protocol --resume measures them again" in m for _, _, m in run.log)
+    assert repair_run(run_file).actions == []  # nothing left to repair
+
+
+def test_repair_then_resume_measures_the_damaged_point_again(tmp_path: Path) -> None:
+    """A killed run whose measured point was then damaged on disk: ``biafc repair`` clears it,
+    and ``--resume`` measures it again, to the same records as a run never interrupted."""
+    import os
+    import subprocess
+    import sys
+
+    from daq.store.repair import repair_run
+    from protocols.swmr_read import open_swmr
+
+    from .helpers import PROTOCOL, killed_run
+    from .test_cli import TESTS
+
+    path = killed_run(tmp_path, 2)
+    with open_swmr(path) as f:
+        info = f["scan/ltr/velocity"].id.get_chunk_info_by_coord((0, 0, 0))
+    flip_bytes(path, info.byte_offset + info.size // 2)
+    report = repair_run(path)
+    assert report.status_after == "aborted" and report.n_done >= 1
+    assert "1 point(s) whose records failed their checksum" in report.line()
+    env = dict(os.environ, FAKE_READ_S="0", PYTHONPATH=str(TESTS))
+    fake = [sys.executable, "-m", "engine.fake_cli"]
+    for args in (["--resume", str(path)], [str(tmp_path / "proto.yaml"), "--out",
+                 str(tmp_path / "full.h5"), "--seed", "5"]):  # fmt: skip
+        res = subprocess.run(fake + args, cwd=TESTS, env=env, capture_output=True, text=True,
+                             timeout=120)  # fmt: skip
+        assert res.returncode == 0, res.stderr
+    assert (tmp_path / "proto.yaml").read_text() == PROTOCOL
+    a, b = read_run(path), read_run(tmp_path / "full.h5")
+    assert a.status == "complete"
+    for d in ("ltr", "rtl"):
+        assert np.array_equal(a.scans[d].done, b.scans[d].done)
+        assert np.array_equal(a.scans[d].velocity, b.scans[d].velocity)
