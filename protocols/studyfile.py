@@ -356,6 +356,21 @@ def read_open_study(path: Path, f: h5py.File, *, spectra: bool = True) -> StudyD
 
 
 def _unreadable(path: Path, exc: BaseException) -> StudyFileError:
+    """The one line of an output that does not read: which cells, where their results fail
+    their checksum (:mod:`protocols.damaged_cells`), else h5py's first line."""
+    from protocols.damaged_cells import damaged_cells, shown
+
+    try:
+        damaged = damaged_cells(path)
+    except Exception:  # damaged elsewhere too: h5py's own line below
+        damaged = []
+    if damaged:
+        n = sum(b - a for a, b in damaged)
+        return StudyFileError(
+            f"{path}: the results of {n} cell(s) fail their checksum (damaged on disk; the "
+            f"other cells are intact): {shown(damaged)}; biafc repair {path} clears them, and "
+            "the study run again computes them"
+        )
     why = (str(exc).splitlines() or [type(exc).__name__])[0]
     return StudyFileError(f"{path}: cannot read ({why})")
 

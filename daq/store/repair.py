@@ -124,8 +124,11 @@ def repair_run(path: str | Path) -> RepairReport:
         except DamagedRecordsError:  # points damaged on disk: cleared, to be measured again
             status_first = _clear_damaged_records(path, actions)
             data = _read(path)
+        except _DamagedCells:  # a study's cells damaged on disk: cleared, to be run again
+            status_first = _clear_damaged_study(path, actions)
+            data = _read(path)
         if isinstance(data, StudyData):
-            return _repair_study(path, data, actions)
+            return _repair_study(path, data, actions, status_first)
         before_counts = _run_counts(data)
         status_before = status_first or data.status
         if has_consistency_flags(path):
@@ -178,14 +181,41 @@ def _read(path: Path) -> RunData | StudyData:
     """The whole file, once (a damaged one waits its grace once: protocols.outputfile); one
     line when it does not read, but records damaged on disk
     (:class:`~protocols.runfile.DamagedRecordsError`) pass."""
+    from protocols.damaged_cells import damaged_cells
+
     try:
         return read_output(path, spectra=False)
     except DamagedRecordsError:
         raise
     except StudyFileError as exc:
+        try:
+            damaged = damaged_cells(path)
+        except (OSError, RunFileError, KeyError):
+            damaged = []
+        if damaged:
+            raise _DamagedCells() from None
         raise StoreError(f"{path} is not a readable biafc study output ({exc})") from None
     except (OSError, RunFileError) as exc:
         raise StoreError(f"{path} is not a readable biafc run file ({exc})") from None
+
+
+class _DamagedCells(Exception):
+    """A study output whose per-cell results fail their checksum somewhere."""
+
+
+def _clear_damaged_study(path: Path, actions: list[str]) -> str:
+    """As :func:`_clear_damaged_records`, for a study output's cells
+    (:mod:`protocols.damaged_cells`)."""
+    from protocols.damaged_cells import clear_damaged_cells
+
+    if has_consistency_flags(path) and clear_consistency_flags(path):
+        actions.append("cleared the open-for-write flags of a killed writer")
+    with h5py.File(path, "r") as f:
+        status = str(f.attrs.get("status", ""))
+    line = clear_damaged_cells(path)
+    if line is not None:
+        actions.append(line)
+    return status
 
 
 def _clear_damaged_records(path: Path, actions: list[str]) -> str:
@@ -204,14 +234,18 @@ def _clear_damaged_records(path: Path, actions: list[str]) -> str:
     return status
 
 
-def _repair_study(path: Path, data: StudyData, actions: list[str]) -> RepairReport:
-    """:func:`repair_run` of a study output read as ``data`` (the caller holds its lock)."""
+def _repair_study(
+    path: Path, data: StudyData, actions: list[str], status_first: str | None = None
+) -> RepairReport:
+    """:func:`repair_run` of a study output read as ``data`` (the caller holds its lock;
+    ``status_first``: its status before damaged cells were cleared, if any were)."""
     before_counts = _study_counts(data)
-    status_before = str(data.attrs.get("status", ""))
+    status_now = str(data.attrs.get("status", ""))
+    status_before = status_first or status_now
     if has_consistency_flags(path) and clear_consistency_flags(path):
         actions.append("cleared the open-for-write flags of a killed writer")
-    status_after = status_before
-    if status_before == "running":
+    status_after = status_now
+    if status_now == "running":
         try:
             f = h5py.File(path, "r+", libver="latest")
         except OSError as exc:  # killed while writing metadata: copy every object
