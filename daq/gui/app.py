@@ -73,6 +73,7 @@ def run_window(args: argparse.Namespace) -> int:
     """Open the window and run the Qt event loop; returns the exit code."""
     from PySide6.QtWidgets import QApplication
 
+    from daq.cli.console_close import hold_console_close
     from daq.gui.main_window import MainWindow
     from daq.logsetup import configure, verbosity
     from protocols.left_open import exit_leaving_them, files_left_open
@@ -86,7 +87,10 @@ def run_window(args: argparse.Namespace) -> int:
     if args.connect:
         win.connect_bench()
     win.show()
+    hold = hold_console_close(win.console_closed)  # Windows: a closed console aborts the run
     code = int(app.exec())
+    if hold is not None:
+        hold.remove()
     if files_left_open():  # a failed write on a full disk: HDF5's clean-up crashes the exit
         exit_leaving_them(code)
     return code

@@ -39,6 +39,10 @@ __all__ = ["Assembler", "MainWindow"]
 #: builds the instruments of a bench file (default: :func:`daq.connect.connect_bench`)
 Assembler = Callable[[Any, "int | None"], Any]
 
+#: how long a closing console (Windows) waits for a run's safe state (s): Windows ends the
+#: process about 5 s after it tells it
+CONSOLE_CLOSE_BOUND_S = 4.5
+
 #: ms between redraws of the live views while events arrive, at the fastest (slower while
 #: drawing takes most of the window's time: :mod:`daq.gui.redraw_pace`)
 REDRAW_MS = FASTEST_MS
@@ -564,6 +568,17 @@ class MainWindow(QMainWindow):
         if self.engine is not None and self.running:
             self.log(f"aborting: {reason}", "warning")
             self.engine.abort(reason)
+
+    def console_closed(self, what: str, bound_s: float = CONSOLE_CLOSE_BOUND_S) -> None:
+        """Windows' console handler thread, not the window's (:mod:`daq.cli.console_close`):
+        the console the window was started from is closing, and Windows ends the process when
+        this returns. A run is aborted, and this waits for its safe state and file, at most
+        ``bound_s`` s. Touches no widget: the engine's abort and wait are thread-safe."""
+        engine = self.engine
+        if engine is None or not self.running:
+            return
+        engine.abort(f"interrupted: {what}")
+        engine.wait(bound_s)
 
     def _on_events(self) -> None:
         """GUI thread: handle a batch of engine events."""

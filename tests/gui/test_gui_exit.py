@@ -32,6 +32,9 @@ class _Window:
     def show(self) -> None:
         pass
 
+    def console_closed(self, what: str) -> None:
+        pass
+
 
 def _args() -> argparse.Namespace:
     return argparse.Namespace(bench=None, protocol=None, run=None, connect=False, verbose=0,
@@ -94,6 +97,7 @@ else:
 class Window:
     def __init__(self, *a): pass
     def show(self): QTimer.singleShot(0, QApplication.instance().quit)
+    def console_closed(self, what): pass
 
 main_window.MainWindow = Window
 ns = app.argparse.Namespace(bench=None, protocol=None, run=None, connect=False, verbose=0,

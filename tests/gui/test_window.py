@@ -276,3 +276,74 @@ def test_a_resume_of_a_file_another_process_writes_is_refused(
     with qtbot.waitSignal(window.run_finished, timeout=60_000) as blocker:
         assert window.start_run(part)  # the lock of a dead process is stale: taken over
     assert blocker.args == ["complete"]
+
+
+def test_a_closed_console_aborts_the_windows_run_before_windows_ends_it(
+    qtbot: Any, tmp_path: Path
+) -> None:
+    """The window started from a Windows console that is then closed: Windows calls the
+    console handler (daq.cli.console_close) on a thread of its own and ends the process when it
+    returns. It now returns once the run is aborted and safe; before, no handler was held and
+    the run was cut off where it stood."""
+    import threading
+
+    win = MainWindow(None, SMOKE, assembler=make_assembler(read_sleep_s=0.1))
+    win.confirm_close = lambda: True  # type: ignore[method-assign]
+    qtbot.addWidget(win)
+    win.show()
+    win.run_panel.out_edit.setText(str(tmp_path / "w.h5"))
+    connect(qtbot, win)
+    win.run_panel.start_button.click()
+    wait_until(qtbot, lambda: win.live.n_points >= 1)
+    engine = win.engine
+    returned: list[Any] = []
+
+    def windows() -> None:
+        win.console_closed("console window closed")
+        returned.append(engine.result)  # what there was when Windows would end the process
+
+    handler = threading.Thread(target=windows)
+    handler.start()
+    wait_until(qtbot, lambda: not handler.is_alive(), timeout_s=10)
+    assert returned[0] is not None and returned[0].status == "aborted"
+    assert returned[0].safe_state_s is not None  # the safe state confirmed before the end
+    assert "interrupted: console window closed" in returned[0].reason
+    run = read_run(tmp_path / "w.h5")
+    assert run.status == "aborted" and 0 < _done_count(tmp_path / "w.h5") < 6
+
+
+def test_the_window_holds_the_console_while_it_runs(qapp: Any, monkeypatch: Any) -> None:
+    import argparse
+
+    import daq.cli.console_close as console_close
+    import daq.gui.main_window as main_window
+    from daq.gui import app
+
+    held: list[Any] = []
+
+    class Hold:
+        def remove(self) -> None:
+            held.append("removed")
+
+    class Window:
+        def __init__(self, *args: Any) -> None:
+            pass
+
+        def show(self) -> None:
+            pass
+
+        def console_closed(self, what: str) -> None:
+            pass
+
+    def hold(on_close: Any, kernel32: Any = None) -> Hold:
+        held.append(on_close)
+        return Hold()
+
+    monkeypatch.setattr(main_window, "MainWindow", Window)
+    monkeypatch.setattr(console_close, "hold_console_close", hold)
+    monkeypatch.setattr(type(qapp), "exec", lambda self: 0)
+    monkeypatch.setattr("daq.logsetup.configure", lambda *a, **k: None)
+    args = argparse.Namespace(bench=None, protocol=None, run=None, connect=False, verbose=0,
+                              quiet=False)  # fmt: skip
+    assert app.run_window(args) == 0
+    assert held[0].__func__ is Window.console_closed and held[1] == "removed"
