@@ -74,6 +74,7 @@ def run_window(args: argparse.Namespace) -> int:
     from PySide6.QtWidgets import QApplication
 
     from daq.cli.console_close import hold_console_close
+    from daq.gui.display_lost import watch_display
     from daq.gui.main_window import MainWindow
     from daq.logsetup import configure, verbosity
     from protocols.left_open import exit_leaving_them, files_left_open
@@ -88,7 +89,9 @@ def run_window(args: argparse.Namespace) -> int:
         win.connect_bench()
     win.show()
     hold = hold_console_close(win.console_closed)  # Windows: a closed console aborts the run
+    unwatch = watch_display(win.display_lost)  # the display gone (ssh -X): aborts the run
     code = int(app.exec())
+    unwatch()
     if hold is not None:
         hold.remove()
     if files_left_open():  # a failed write on a full disk: HDF5's clean-up crashes the exit

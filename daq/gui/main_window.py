@@ -43,6 +43,10 @@ Assembler = Callable[[Any, "int | None"], Any]
 #: process about 5 s after it tells it
 CONSOLE_CLOSE_BOUND_S = 4.5
 
+#: how long the window waits for a run's safe state when its display is gone (s): as long as
+#: a window closed during a run waits
+DISPLAY_LOST_BOUND_S = 60.0
+
 #: ms between redraws of the live views while events arrive, at the fastest (slower while
 #: drawing takes most of the window's time: :mod:`daq.gui.redraw_pace`)
 REDRAW_MS = FASTEST_MS
@@ -574,10 +578,20 @@ class MainWindow(QMainWindow):
         the console the window was started from is closing, and Windows ends the process when
         this returns. A run is aborted, and this waits for its safe state and file, at most
         ``bound_s`` s. Touches no widget: the engine's abort and wait are thread-safe."""
+        self._abort_and_wait(f"interrupted: {what}", bound_s)
+
+    def display_lost(self, message: str, bound_s: float = DISPLAY_LOST_BOUND_S) -> None:
+        """The display is gone (:mod:`daq.gui.display_lost`; Qt's warning ``message``), and Qt
+        ends the process when this returns. A run is aborted, and this waits for its safe state
+        and file, at most ``bound_s`` s. Touches no widget: there is no display to draw on."""
+        self._abort_and_wait(f"interrupted: the display went away ({message.strip()})", bound_s)
+
+    def _abort_and_wait(self, reason: str, bound_s: float) -> None:
         engine = self.engine
         if engine is None or not self.running:
             return
-        engine.abort(f"interrupted: {what}")
+        logging.getLogger("biafc.gui").error("%s: aborting the run", reason)
+        engine.abort(reason)
         engine.wait(bound_s)
 
     def _on_events(self) -> None:

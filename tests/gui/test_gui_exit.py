@@ -35,6 +35,9 @@ class _Window:
     def console_closed(self, what: str) -> None:
         pass
 
+    def display_lost(self, message: str) -> None:
+        pass
+
 
 def _args() -> argparse.Namespace:
     return argparse.Namespace(bench=None, protocol=None, run=None, connect=False, verbose=0,
@@ -98,6 +101,7 @@ class Window:
     def __init__(self, *a): pass
     def show(self): QTimer.singleShot(0, QApplication.instance().quit)
     def console_closed(self, what): pass
+    def display_lost(self, message): pass
 
 main_window.MainWindow = Window
 ns = app.argparse.Namespace(bench=None, protocol=None, run=None, connect=False, verbose=0,

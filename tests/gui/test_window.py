@@ -335,6 +335,9 @@ def test_the_window_holds_the_console_while_it_runs(qapp: Any, monkeypatch: Any)
         def console_closed(self, what: str) -> None:
             pass
 
+        def display_lost(self, message: str) -> None:
+            pass
+
     def hold(on_close: Any, kernel32: Any = None) -> Hold:
         held.append(on_close)
         return Hold()

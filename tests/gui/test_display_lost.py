@@ -1,0 +1,145 @@
+"""The display going away under the bench window (``ssh -X`` dropped, the X server gone):
+Qt warns "The X11 connection broke" and ends the process. Before, a run was cut off where it
+stood (on Xvfb killed mid-run: exit 1, the file ``running`` with its lock, the log cut short,
+no safe state); now the window aborts it and waits for its safe state first
+(:mod:`daq.gui.display_lost`)."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+from PySide6.QtCore import qWarning
+
+from daq.gui.display_lost import watch_display
+from daq.gui.main_window import MainWindow
+from protocols.runfile import PointState, read_run
+
+from .conftest import SMOKE, connect, make_assembler, wait_until
+
+ROOT = Path(__file__).resolve().parents[2]
+BROKE = "The X11 connection broke (error 1). Did the X11 server die?"
+
+
+def test_the_watch_passes_messages_on_and_calls_back_on_a_broken_connection() -> None:
+    from PySide6.QtCore import qInstallMessageHandler
+
+    before: list[str] = []  # the handler in place before (Qt's own, or pytest-qt's here)
+    outer = qInstallMessageHandler(lambda mode, context, message: before.append(message))
+    lost: list[str] = []
+    try:
+        restore = watch_display(lost.append)
+        qWarning("a warning of no consequence")
+        assert lost == [] and before == ["a warning of no consequence"]
+        qWarning(BROKE)
+        assert lost == [BROKE] and before[-1] == BROKE  # passed on, then called back
+        restore()
+        qWarning(BROKE)
+        assert lost == [BROKE] and len(before) == 3  # the previous handler is back
+    finally:
+        qInstallMessageHandler(outer)
+
+
+def test_the_window_aborts_its_run_safely_when_the_display_is_lost(
+    qtbot: Any, tmp_path: Path
+) -> None:
+    win = MainWindow(None, SMOKE, assembler=make_assembler(read_sleep_s=0.1))
+    win.confirm_close = lambda: True  # type: ignore[method-assign]
+    qtbot.addWidget(win)
+    win.show()
+    win.run_panel.out_edit.setText(str(tmp_path / "d.h5"))
+    connect(qtbot, win)
+    win.run_panel.start_button.click()
+    wait_until(qtbot, lambda: win.live.n_points >= 1)
+    engine = win.engine
+    win.display_lost(BROKE)  # on the window's thread, as Qt's warning comes
+    result = engine.result  # what there is when Qt ends the process
+    assert result is not None and result.status == "aborted"
+    assert result.safe_state_s is not None
+    assert "the display went away" in result.reason
+    run = read_run(tmp_path / "d.h5")
+    assert run.status == "aborted"
+    assert not (tmp_path / "d.h5.lock").exists()
+
+
+_SCRIPT = r"""
+import sys
+from PySide6.QtCore import QTimer
+import daq.gui.main_window as main_window
+from daq.gui import app
+from tests.gui.conftest import SMOKE, make_assembler
+
+out = sys.argv[1]
+Real = main_window.MainWindow
+
+class Window(Real):  # the window with a slow simulated bench, its run started at once
+    def __init__(self, bench, protocol):
+        super().__init__(bench, SMOKE, assembler=make_assembler(read_sleep_s=1.0))
+        self.confirm_close = lambda: True
+        self.run_panel.out_edit.setText(out)
+        self.connected.connect(lambda ok: QTimer.singleShot(0, self.run_panel.start_button.click))
+        QTimer.singleShot(0, self.bench_panel.connect_button.click)
+
+main_window.MainWindow = Window
+ns = app.argparse.Namespace(bench=None, protocol=None, run=None, connect=False, verbose=0,
+                            quiet=False)
+sys.exit(app.run_window(ns))
+"""
+
+
+def _xvfb(display: str) -> subprocess.Popen[bytes] | None:
+    """An X server of its own on ``display``, or None where Xvfb or Qt's xcb plugin is
+    missing."""
+    if sys.platform != "linux" or shutil.which("Xvfb") is None:
+        return None
+    server = subprocess.Popen(["Xvfb", display, "-nolisten", "tcp"],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)  # fmt: skip
+    time.sleep(1.0)
+    env = dict(os.environ, DISPLAY=display, QT_QPA_PLATFORM="xcb")
+    code = "from PySide6.QtWidgets import QApplication; QApplication([])"
+    probe = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, timeout=60)
+    if server.poll() is not None or probe.returncode != 0:
+        server.kill()
+        return None
+    return server
+
+
+def test_a_real_display_lost_mid_run_ends_the_run_safely(tmp_path: Path) -> None:
+    display = f":{90 + os.getpid() % 9}"
+    server = _xvfb(display)
+    if server is None:
+        pytest.skip("needs Xvfb and Qt's xcb platform plugin (its X libraries)")
+    out = tmp_path / "x.h5"
+    env = dict(os.environ, DISPLAY=display, QT_QPA_PLATFORM="xcb", PYTHONPATH=str(ROOT))
+    proc = subprocess.Popen([sys.executable, "-c", textwrap.dedent(_SCRIPT), str(out)], env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
+    try:
+        t_end = time.monotonic() + 60
+        while time.monotonic() < t_end:  # the display goes once a point is measured
+            assert proc.poll() is None, proc.communicate()
+            try:
+                if (read_run(out).scans["ltr"].done == PointState.DONE).any():
+                    break
+            except (OSError, ValueError, KeyError):
+                pass
+            time.sleep(0.1)
+        server.send_signal(signal.SIGTERM)
+        _, stderr = proc.communicate(timeout=60)
+    finally:
+        server.kill()
+        proc.kill()
+    assert "The X11 connection broke" in stderr
+    run = read_run(out)
+    assert run.status == "aborted", stderr[-2000:]
+    log = out.with_suffix(".log").read_text(encoding="utf-8")
+    assert "run aborted: interrupted: the display went away" in log
+    assert "safe state confirmed" in log
+    assert not (tmp_path / "x.h5.lock").exists()
