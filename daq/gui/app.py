@@ -4,12 +4,20 @@ the bench window."""
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import os
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
-__all__ = ["add_arguments", "check_paths", "display_problem", "main", "run_window"]
+__all__ = [
+    "add_arguments",
+    "check_paths",
+    "display_problem",
+    "main",
+    "run_window",
+    "xcb_plugin_problem",
+]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -48,12 +56,44 @@ def check_paths(args: argparse.Namespace) -> str | None:
     return None
 
 
-def display_problem(env: dict[str, str] | None = None, platform: str | None = None) -> str | None:
+def xcb_plugin_problem() -> str | None:
+    """Why Qt's X11 platform plugin (``libqxcb.so``, PySide6's own) cannot load here, in one
+    line saying what to install, or None. It needs X11 libraries of the system that a desktop
+    may lack (``libxcb-cursor0`` since Qt 6.5, ``libxcb-icccm4``...); Qt then aborted the
+    process (status 134) with a long message naming only the first, and that only in part."""
+    import ctypes
+
+    spec = importlib.util.find_spec("PySide6")
+    if spec is None or spec.origin is None:
+        return None
+    plugin = Path(spec.origin).parent / "Qt" / "plugins" / "platforms" / "libqxcb.so"
+    if not plugin.is_file():
+        return None
+    try:
+        ctypes.CDLL(str(plugin))
+    except OSError as exc:
+        why = (str(exc).splitlines() or ["cannot load"])[0].replace(f"{plugin}: ", "")
+        return (
+            f"Qt's X11 platform plugin cannot load ({why}): install the X11 libraries Qt 6 "
+            "needs (Debian, Ubuntu: sudo apt install libxcb-cursor0 libxcb-icccm4 "
+            "libxcb-keysyms1 libxcb-image0 libxcb-render-util0 libxkbcommon-x11-0 "
+            "libxcb-xinerama0 libxcb-shape0), or set QT_QPA_PLATFORM=offscreen to run it "
+            "without a screen"
+        )
+    return None
+
+
+def display_problem(
+    env: dict[str, str] | None = None,
+    platform: str | None = None,
+    xcb_problem: Callable[[], str | None] = xcb_plugin_problem,
+) -> str | None:
     """Why the window cannot open here (one line saying what to do), or None.
 
     On Linux Qt's default platform (xcb) needs an X display (``DISPLAY``) or Wayland
-    (``WAYLAND_DISPLAY``); without one Qt aborts the process with a long xcb message. An
-    explicit ``QT_QPA_PLATFORM`` other than xcb (offscreen, wayland, vnc...) is left to Qt."""
+    (``WAYLAND_DISPLAY``); without one Qt aborts the process with a long xcb message. With a
+    display, its plugin must load (``xcb_problem``: :func:`xcb_plugin_problem`). An explicit
+    ``QT_QPA_PLATFORM`` other than xcb (offscreen, wayland, vnc...) is left to Qt."""
     env = dict(os.environ) if env is None else env
     platform = sys.platform if platform is None else platform
     if not platform.startswith("linux"):
@@ -61,8 +101,10 @@ def display_problem(env: dict[str, str] | None = None, platform: str | None = No
     qpa = env.get("QT_QPA_PLATFORM", "").split(":")[0]
     if qpa and qpa != "xcb":
         return None
-    if env.get("DISPLAY") or (not qpa and env.get("WAYLAND_DISPLAY")):
+    if not qpa and env.get("WAYLAND_DISPLAY"):
         return None
+    if env.get("DISPLAY"):
+        return xcb_problem()
     return (
         "no display to open the window on (DISPLAY is not set): log in with ssh -X (or -Y) to "
         "show it here, or set QT_QPA_PLATFORM=offscreen to run it without a screen"

@@ -50,10 +50,39 @@ def test_gui_unknown_protocol_lists_the_shipped_ones(
     ],
 )
 def test_display_problem(env: dict[str, str], platform: str, problem: bool) -> None:
-    why = app.display_problem(env, platform)
+    why = app.display_problem(env, platform, xcb_problem=lambda: None)
     assert (why is not None) == problem
     if why:
         assert "QT_QPA_PLATFORM=offscreen" in why and "ssh -X" in why
+
+
+def test_an_x11_plugin_that_cannot_load_is_one_line_naming_what_to_install(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A desktop without the X11 libraries Qt 6 needs: Qt aborted the process (status 134)
+    after a long message that named libxcb-cursor0 only; the library missing first was
+    libxcb-icccm4 here."""
+    import ctypes
+
+    def missing(name: str, *args: Any, **kw: Any) -> Any:
+        if name.endswith("libqxcb.so"):
+            raise OSError(f"{name}: libxcb-icccm.so.4: cannot open shared object file")
+        return real(name, *args, **kw)
+
+    real = ctypes.CDLL
+    monkeypatch.setattr(ctypes, "CDLL", missing)
+    import PySide6
+
+    if not (Path(PySide6.__file__).parent / "Qt/plugins/platforms/libqxcb.so").is_file():
+        pytest.skip("this PySide6 has no X11 platform plugin (libqxcb.so)")
+    why = app.display_problem({"DISPLAY": ":0"}, "linux")
+    assert why is not None and "\n" not in why
+    assert "libxcb-icccm.so.4: cannot open shared object file" in why
+    assert "libxcb-cursor0" in why and "QT_QPA_PLATFORM=offscreen" in why
+    assert app.display_problem({"DISPLAY": ":0", "QT_QPA_PLATFORM": "offscreen"}, "linux") is None
+    monkeypatch.setattr(ctypes, "CDLL", real)
+    loads = app.xcb_plugin_problem()
+    assert loads is None or "cannot load" in loads  # this machine's own answer, one line
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="xcb is Linux's")
