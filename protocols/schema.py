@@ -18,6 +18,8 @@ A protocol file (YAML) looks like::
     output: "runs/{name}_{timestamp}.h5"
     on_point_failure: continue        # or stop
     retries: 2
+    max_failed_in_a_row: 10           # the run ends failed after this many failed points in a
+                                      # row: the bench needs attention (0: never)
 
 Load with :func:`load_protocol`; every error is one line ``FILE:LINE: field: message``. Every
 number is bounded (:data:`BOUNDS`: durations, rates, cycles; counts and cylinders by their
@@ -292,6 +294,10 @@ class Protocol(_Model):
     output: str = "runs/{name}_{timestamp}.h5"
     on_point_failure: Literal["continue", "stop"] = "continue"
     retries: int = 2
+    #: with ``on_point_failure: continue``: the run ends failed once this many points in a row
+    #: failed every attempt (a trigger cable out, the laser spot lost: every point would fail,
+    #: each after its retries and timeouts); 0: never
+    max_failed_in_a_row: int = 10
 
     @field_validator("name")
     @classmethod
@@ -350,6 +356,11 @@ class Protocol(_Model):
     @classmethod
     def _retries(cls, v: Any) -> int:
         return _whole("retries", v, 0, 100)
+
+    @field_validator("max_failed_in_a_row", mode="before")
+    @classmethod
+    def _max_failed_in_a_row(cls, v: Any) -> int:
+        return _whole("max_failed_in_a_row", v, 0, 1_000_000)
 
     @field_validator("cylinders", mode="before")
     @classmethod

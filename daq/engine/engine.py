@@ -637,6 +637,7 @@ class RunEngine:
         )
         armed: tuple[str, int] | None = None
         t_start = t_last = time.monotonic()
+        in_a_row = 0  # points failed in a row, up to proto.max_failed_in_a_row
         for k, point in enumerate(todo):
             self._check_boundary()
             room_for_a_point(self.out_path, time_s.size, n_done)  # else DiskFull: the run ends
@@ -647,9 +648,13 @@ class RunEngine:
             if ok:
                 n_done += 1
                 self._n_now += 1
+                in_a_row = 0
             else:
                 n_failed += 1
                 self._n_failed_now += 1
+                in_a_row += 1
+                if 0 < proto.max_failed_in_a_row <= in_a_row:
+                    return n_done, n_failed, "failed", self._bench_needs_attention(in_a_row)
                 if proto.on_point_failure == "stop":
                     return (
                         n_done,
@@ -689,6 +694,15 @@ class RunEngine:
                 f"re-measure them with --resume {self.out_path}",
             )
         return n_done, n_failed, "complete", ""
+
+    def _bench_needs_attention(self, in_a_row: int) -> str:
+        """The reason of a run ended by ``in_a_row`` failed points in a row (the last one's
+        error is in the log just before)."""
+        return (
+            f"{in_a_row} points in a row failed (max_failed_in_a_row): the bench needs attention "
+            "(the trigger cable, the laser spot, an instrument); the failed points are marked in "
+            f"the file: fix the bench, then --resume {self.out_path}"
+        )
 
     def _arm_generator(self, point: Point) -> None:
         """Upload the burst of ``point`` on its direction's channel; only that output on."""

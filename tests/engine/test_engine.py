@@ -198,3 +198,41 @@ def test_engine_runs_once(protocol, bench, out: Path) -> None:
     with pytest.raises(RuntimeError, match="runs once"):
         eng.run()
     assert read_run(out).status == "complete"
+
+
+def test_a_bench_fault_that_fails_every_point_ends_the_run_after_a_few(bench, out: Path) -> None:
+    """The trigger never arrives (every read times out): each point failed its 3 attempts and
+    the run went on to the end, at the default 10 s read timeout 30 s a point, 20 hours for
+    2,480 points, with the generator driving the piezo all along. Now the run ends failed after
+    ``max_failed_in_a_row`` failed points, safe, the rest pending for --resume."""
+    p = make_protocol(**{"retries: 2": "retries: 2\nmax_failed_in_a_row: 3"})
+    w = FakeWorld(faults=Faults(timeouts=10_000))
+    _, res, _, _ = _run(p, bench, out, w)
+    assert res.status == "failed" and not res.points_failed_only
+    assert res.n_failed == 3
+    assert "3 points in a row failed (max_failed_in_a_row)" in res.reason
+    assert f"--resume {out}" in res.reason
+    assert res.safe_state_s is not None and not any(w.outputs.values())
+    run = read_run(out)
+    assert run.status == "failed"
+    done = np.concatenate([s.done.ravel() for s in run.scans.values()])
+    assert np.sum(done == PointState.FAILED) == 3 and np.sum(done == PointState.PENDING) == 9
+    assert 10_000 - w.faults.timeouts == 3 * 3  # 3 points x 3 attempts, each read timed out
+
+
+def test_failed_points_apart_do_not_end_the_run(bench, out: Path) -> None:
+    """Two points in a row fail, then the bench measures again: the count starts over."""
+    p = make_protocol(**{"retries: 2": "retries: 2\nmax_failed_in_a_row: 3"})
+    w = FakeWorld(faults=Faults(timeouts=6))  # 2 points x 3 attempts
+    _, res, _, _ = _run(p, bench, out, w)
+    assert res.status == "failed" and res.points_failed_only and res.n_failed == 2
+
+
+def test_max_failed_in_a_row_is_bounded_in_one_line() -> None:
+    from protocols.yamlfile import ConfigError
+
+    with pytest.raises(ConfigError) as err:
+        make_protocol(**{"retries: 2": "retries: 2\nmax_failed_in_a_row: -1"})
+    assert "max_failed_in_a_row" in str(err.value) and "\n" not in str(err.value)
+    assert make_protocol().protocol.max_failed_in_a_row == 10
+    assert make_protocol(**{"retries: 2": "retries: 2\nmax_failed_in_a_row: 0"})
