@@ -17,12 +17,13 @@ drive.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import json
 import logging
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -32,6 +33,7 @@ from numpy.typing import NDArray
 
 from daq.engine.events import EventBus, EventKind, RunEvent, RunState, Subscriber
 from daq.engine.instruments import BenchInstruments
+from daq.engine.keep_awake import cannot_line, keep_awake
 from daq.engine.plan import Plan, Point, make_plan
 from daq.store import create_run, resume_run
 from daq.store.disk_space import DiskFull, room_for_a_point
@@ -365,13 +367,15 @@ class RunEngine:
         self._n_now = 0
         self._n_failed_now = 0
         self._refused = False
+        self._awake_note: tuple[str, str] | None = None
         with self._lock:
             if self._state != RunState.IDLE:
                 raise RuntimeError("a RunEngine runs once; make a new one")
             self._state = RunState.RUNNING
         self._emit(EventKind.STATE_CHANGED, "idle -> running", state="running", previous="idle")
         try:
-            n_done, n_failed, status, reason = self._run_points(t0)
+            with self._awake():
+                n_done, n_failed, status, reason = self._run_points(t0)
         except RequestRefused as exc:
             status, reason = "refused", str(exc)
             self._refused = True
@@ -614,6 +618,8 @@ class RunEngine:
         writer = self._writer
         if self._file_lock.stale_note:
             self._log("warning", f"{self.out_path.name}: {self._file_lock.stale_note}")
+        if self._awake_note is not None:
+            self._log(*self._awake_note)
         done = {d: writer.done_mask(d) for d in self.plan.directions}
         todo = [
             p
@@ -694,6 +700,21 @@ class RunEngine:
                 f"re-measure them with --resume {self.out_path}",
             )
         return n_done, n_failed, "complete", ""
+
+    @contextlib.contextmanager
+    def _awake(self) -> Iterator[None]:
+        """A lab bench's run keeps the computer from sleeping (:mod:`daq.engine.keep_awake`);
+        the simulated bench's holds nothing."""
+        if self.bench_file.bench.simulation is not None:
+            yield
+            return
+        with keep_awake() as (holder, why_not):
+            # logged once the file exists (_run_points): its /log keeps it too
+            if holder is not None:
+                self._awake_note = ("info", f"the computer is kept awake during the run ({holder})")
+            else:
+                self._awake_note = ("warning", cannot_line(str(why_not)))
+            yield
 
     def _bench_needs_attention(self, in_a_row: int) -> str:
         """The reason of a run ended by ``in_a_row`` failed points in a row (the last one's
