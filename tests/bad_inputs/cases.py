@@ -222,6 +222,8 @@ CASES: tuple[Case, ...] = (
        "pre_trigger: 0.5 ms, timeout: 1 ns", ("proto.yaml", "timeout")),
     _p("averages_true", "averages: true", "averages: 2", "averages: true",
        ("proto.yaml", "averages")),
+    _p("max_failed_negative", "max_failed_in_a_row: -1", "retries: 2",
+       "retries: 2\nmax_failed_in_a_row: -1", ("proto.yaml", "max_failed_in_a_row", "0 to")),
     _p("name_newline", "a line break in the name", "name: smoke", 'name: "a\\nb"',
        ("proto.yaml", "name")),
     _p("pattern_attribute", "output pattern with attribute access",
