@@ -122,3 +122,41 @@ def wait_until(qtbot: Any, cond: Callable[[], bool], timeout_s: float = 60.0) ->
     t0 = time.monotonic()
     qtbot.waitUntil(cond, timeout=int(timeout_s * 1000))
     assert time.monotonic() - t0 <= timeout_s
+
+
+def running_window(qtbot: Any, out: Path, read_sleep_s: float = 0.1) -> MainWindow:
+    """A window on the slowed simulated bench whose run into ``out`` has measured a point."""
+    win = MainWindow(None, SMOKE, assembler=make_assembler(read_sleep_s=read_sleep_s))
+    win.confirm_close = lambda: True  # type: ignore[method-assign]
+    qtbot.addWidget(win)
+    win.show()
+    win.run_panel.out_edit.setText(str(out))
+    connect(qtbot, win)
+    win.run_panel.start_button.click()
+    wait_until(qtbot, lambda: win.live.n_points >= 1)
+    return win
+
+
+class StubWindow:
+    """What ``daq.gui.app.run_window`` asks of the window, doing nothing (tests of the app's
+    own steps)."""
+
+    def __init__(self, *args: Any) -> None:
+        pass
+
+    def show(self) -> None:
+        pass
+
+    def console_closed(self, what: str) -> None:
+        pass
+
+    def display_lost(self, message: str) -> None:
+        pass
+
+
+def window_args() -> Any:
+    """``biafc gui``'s parsed arguments with nothing given."""
+    import argparse
+
+    return argparse.Namespace(bench=None, protocol=None, run=None, connect=False, verbose=0,
+                              quiet=False)  # fmt: skip

@@ -20,10 +20,9 @@ import pytest
 from PySide6.QtCore import qWarning
 
 from daq.gui.display_lost import watch_display
-from daq.gui.main_window import MainWindow
 from protocols.runfile import PointState, read_run
 
-from .conftest import SMOKE, connect, make_assembler, wait_until
+from .conftest import running_window
 
 ROOT = Path(__file__).resolve().parents[2]
 BROKE = "The X11 connection broke (error 1). Did the X11 server die?"
@@ -51,14 +50,7 @@ def test_the_watch_passes_messages_on_and_calls_back_on_a_broken_connection() ->
 def test_the_window_aborts_its_run_safely_when_the_display_is_lost(
     qtbot: Any, tmp_path: Path
 ) -> None:
-    win = MainWindow(None, SMOKE, assembler=make_assembler(read_sleep_s=0.1))
-    win.confirm_close = lambda: True  # type: ignore[method-assign]
-    qtbot.addWidget(win)
-    win.show()
-    win.run_panel.out_edit.setText(str(tmp_path / "d.h5"))
-    connect(qtbot, win)
-    win.run_panel.start_button.click()
-    wait_until(qtbot, lambda: win.live.n_points >= 1)
+    win = running_window(qtbot, tmp_path / "d.h5")
     engine = win.engine
     win.display_lost(BROKE)  # on the window's thread, as Qt's warning comes
     result = engine.result  # what there is when Qt ends the process

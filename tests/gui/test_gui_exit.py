@@ -5,7 +5,6 @@ ends with its own status, its logs flushed."""
 
 from __future__ import annotations
 
-import argparse
 import os
 import subprocess
 import sys
@@ -18,30 +17,13 @@ import pytest
 from daq.gui import app
 from protocols import left_open
 
+from .conftest import StubWindow, window_args
+
 ROOT = Path(__file__).resolve().parents[2]
 
 
 class _Ended(Exception):
     pass
-
-
-class _Window:
-    def __init__(self, *args: Any) -> None:
-        pass
-
-    def show(self) -> None:
-        pass
-
-    def console_closed(self, what: str) -> None:
-        pass
-
-    def display_lost(self, message: str) -> None:
-        pass
-
-
-def _args() -> argparse.Namespace:
-    return argparse.Namespace(bench=None, protocol=None, run=None, connect=False, verbose=0,
-                              quiet=False)  # fmt: skip
 
 
 @pytest.fixture
@@ -57,7 +39,7 @@ def window(qapp: Any, monkeypatch: pytest.MonkeyPatch) -> list[int]:
         ended.append(code)
         raise _Ended
 
-    monkeypatch.setattr(main_window, "MainWindow", _Window)
+    monkeypatch.setattr(main_window, "MainWindow", StubWindow)
     monkeypatch.setattr(type(qapp), "exec", lambda self: 3)
     monkeypatch.setattr(left_open, "exit_leaving_them", _exit)
     monkeypatch.setattr("daq.logsetup.configure", lambda *a, **k: None)
@@ -67,12 +49,12 @@ def window(qapp: Any, monkeypatch: pytest.MonkeyPatch) -> list[int]:
 def test_the_window_ends_without_hdf5s_clean_up_when_a_file_was_left_open(window) -> None:
     left_open.leave_open("/data/run.h5")
     with pytest.raises(_Ended):
-        app.run_window(_args())
+        app.run_window(window_args())
     assert window == [3]  # the window's own status
 
 
 def test_the_window_returns_its_status_when_no_file_was_left_open(window) -> None:
-    assert app.run_window(_args()) == 3
+    assert app.run_window(window_args()) == 3
     assert window == []
 
 

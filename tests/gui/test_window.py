@@ -287,14 +287,9 @@ def test_a_closed_console_aborts_the_windows_run_before_windows_ends_it(
     the run was cut off where it stood."""
     import threading
 
-    win = MainWindow(None, SMOKE, assembler=make_assembler(read_sleep_s=0.1))
-    win.confirm_close = lambda: True  # type: ignore[method-assign]
-    qtbot.addWidget(win)
-    win.show()
-    win.run_panel.out_edit.setText(str(tmp_path / "w.h5"))
-    connect(qtbot, win)
-    win.run_panel.start_button.click()
-    wait_until(qtbot, lambda: win.live.n_points >= 1)
+    from .conftest import running_window
+
+    win = running_window(qtbot, tmp_path / "w.h5")
     engine = win.engine
     returned: list[Any] = []
 
@@ -313,11 +308,11 @@ def test_a_closed_console_aborts_the_windows_run_before_windows_ends_it(
 
 
 def test_the_window_holds_the_console_while_it_runs(qapp: Any, monkeypatch: Any) -> None:
-    import argparse
-
     import daq.cli.console_close as console_close
     import daq.gui.main_window as main_window
     from daq.gui import app
+
+    from .conftest import StubWindow, window_args
 
     held: list[Any] = []
 
@@ -325,28 +320,13 @@ def test_the_window_holds_the_console_while_it_runs(qapp: Any, monkeypatch: Any)
         def remove(self) -> None:
             held.append("removed")
 
-    class Window:
-        def __init__(self, *args: Any) -> None:
-            pass
-
-        def show(self) -> None:
-            pass
-
-        def console_closed(self, what: str) -> None:
-            pass
-
-        def display_lost(self, message: str) -> None:
-            pass
-
     def hold(on_close: Any, kernel32: Any = None) -> Hold:
         held.append(on_close)
         return Hold()
 
-    monkeypatch.setattr(main_window, "MainWindow", Window)
+    monkeypatch.setattr(main_window, "MainWindow", StubWindow)
     monkeypatch.setattr(console_close, "hold_console_close", hold)
     monkeypatch.setattr(type(qapp), "exec", lambda self: 0)
     monkeypatch.setattr("daq.logsetup.configure", lambda *a, **k: None)
-    args = argparse.Namespace(bench=None, protocol=None, run=None, connect=False, verbose=0,
-                              quiet=False)  # fmt: skip
-    assert app.run_window(args) == 0
-    assert held[0].__func__ is Window.console_closed and held[1] == "removed"
+    assert app.run_window(window_args()) == 0
+    assert held[0].__func__ is StubWindow.console_closed and held[1] == "removed"
