@@ -60,13 +60,14 @@ def keep_awake(
             import ctypes
 
             kernel32 = ctypes.WinDLL("kernel32")  # type: ignore[attr-defined]
-        if kernel32.SetThreadExecutionState(ES_CONTINUOUS | ES_SYSTEM_REQUIRED):
-            try:
+        held = kernel32.SetThreadExecutionState(ES_CONTINUOUS | ES_SYSTEM_REQUIRED)
+        try:  # 0: failed (or, the documentation allows it, a previous state of 0)
+            if held:
                 yield "SetThreadExecutionState(ES_CONTINUOUS | ES_SYSTEM_REQUIRED)", None
-            finally:
-                kernel32.SetThreadExecutionState(ES_CONTINUOUS)
-            return
-        yield None, "SetThreadExecutionState refused"
+            else:
+                yield None, "SetThreadExecutionState refused"
+        finally:
+            kernel32.SetThreadExecutionState(ES_CONTINUOUS)  # reset either way: harmless
         return
     cmd = _helper(which, platform)
     if cmd is None:

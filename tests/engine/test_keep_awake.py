@@ -38,8 +38,10 @@ def test_windows_asks_the_system_to_stay_up_and_resets_it_after() -> None:
         assert holder is not None and why_not is None
         assert k.calls == [ES_CONTINUOUS | ES_SYSTEM_REQUIRED]
     assert k.calls == [ES_CONTINUOUS | ES_SYSTEM_REQUIRED, ES_CONTINUOUS]
-    with keep_awake(kernel32=Kernel32(answer=0)) as (holder, why_not):
+    refused = Kernel32(answer=0)
+    with keep_awake(kernel32=refused) as (holder, why_not):
         assert holder is None and why_not == "SetThreadExecutionState refused"
+    assert refused.calls[-1] == ES_CONTINUOUS  # reset all the same
 
 
 def _script(folder: Path, body: str) -> Path:
