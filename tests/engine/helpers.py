@@ -96,3 +96,18 @@ def flip_bytes(path: Path, offset: int, n: int = 8) -> None:
         raw = fh.read(n)
         fh.seek(offset)
         fh.write(bytes(b ^ 0xFF for b in raw))
+
+
+def fake_free_space(monkeypatch: Any, *values: int) -> list[int]:
+    """The disk's free bytes (``daq.store.disk_space.free_bytes``), in turn (the last one from
+    then on); returns the list of calls made, one entry each."""
+    from daq.store import disk_space
+
+    calls: list[int] = []
+
+    def free(path: object) -> int:
+        calls.append(1)
+        return values[min(len(calls), len(values)) - 1]
+
+    monkeypatch.setattr(disk_space, "free_bytes", free)
+    return calls

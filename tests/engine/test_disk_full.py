@@ -30,30 +30,18 @@ from protocols.left_open import files_left_open
 from protocols.runfile import PointState, read_run
 
 from .fakes import FakeWorld, fake_bench
-from .helpers import PROTOCOL
+from .helpers import PROTOCOL, fake_free_space
 
 TESTS = Path(__file__).resolve().parents[1]
 #: one point of PROTOCOL: 220 samples (2.2 ms at 100 kS/s), velocity and drive, float32
 POINT = 2 * 4 * 220
 
 
-def _free(monkeypatch: pytest.MonkeyPatch, *values: int) -> list[int]:
-    """The disk's free bytes, in turn (the last one from then on); returns the calls made."""
-    calls: list[int] = []
-
-    def free(path: object) -> int:
-        calls.append(1)
-        return values[min(len(calls), len(values)) - 1]
-
-    monkeypatch.setattr(disk_space, "free_bytes", free)
-    return calls
-
-
 def test_a_run_that_cannot_fit_is_refused_before_anything_moves(
     proto_file, tmp_path, monkeypatch, capsys
 ) -> None:
     need = 12 * POINT + disk_space.MARGIN_BYTES
-    _free(monkeypatch, need - 1)
+    fake_free_space(monkeypatch, need - 1)
     with pytest.raises(RequestError) as exc:
         validate_request(proto_file, out=tmp_path / "r.h5")
     msg = str(exc.value)
@@ -62,26 +50,28 @@ def test_a_run_that_cannot_fit_is_refused_before_anything_moves(
     monkeypatch.setattr(daq.connect, "connect_bench", lambda *a, **k: pytest.fail("connected"))
     assert rp.main([str(proto_file), "--out", str(tmp_path / "r.h5"), "--quiet"]) == 2
     assert not (tmp_path / "r.h5").exists()
-    _free(monkeypatch, need)
+    fake_free_space(monkeypatch, need)
     validate_request(proto_file, out=tmp_path / "r.h5")  # fits exactly
 
 
 def test_a_resume_needs_room_for_its_pending_points_only(protocol, bench, out, monkeypatch) -> None:
-    _free(monkeypatch, 10**12, 10**12, 0)  # full after the second point
+    fake_free_space(monkeypatch, 10**12, 10**12, 0)  # full after the second point
     res = RunEngine(protocol, bench, fake_bench(FakeWorld()), out).run()
     assert res.status == "failed" and res.n_measured_now == 2
     pending = 10 * POINT + disk_space.MARGIN_BYTES
-    _free(monkeypatch, pending - 1)
+    fake_free_space(monkeypatch, pending - 1)
     with pytest.raises(RequestError, match="10 point"):
         validate_request(protocol, bench, resume=out)
-    _free(monkeypatch, pending)
+    fake_free_space(monkeypatch, pending)
     validate_request(protocol, bench, resume=out)
 
 
 def test_a_disk_that_fills_during_a_run_ends_it_failed_with_every_point_kept(
     protocol, bench, out, tmp_path, monkeypatch
 ) -> None:
-    calls = _free(monkeypatch, 10**12, 10**12, 10**12, disk_space.MARGIN_BYTES + POINT - 1)
+    calls = fake_free_space(
+        monkeypatch, 10**12, 10**12, 10**12, disk_space.MARGIN_BYTES + POINT - 1
+    )
     res = RunEngine(protocol, bench, fake_bench(FakeWorld(seed=3)), out, seed=3).run()
     assert res.status == "failed" and res.safe_state_s is not None
     assert "is full" in res.reason and "3 point(s) kept" in res.reason
@@ -89,7 +79,7 @@ def test_a_disk_that_fills_during_a_run_ends_it_failed_with_every_point_kept(
     assert res.n_measured_now == 3 and len(calls) == 4  # one look before each point
     run = read_run(out)
     assert run.status == "failed"
-    _free(monkeypatch, 10**12)
+    fake_free_space(monkeypatch, 10**12)
     assert RunEngine(protocol, bench, fake_bench(FakeWorld(seed=3)), out, resume=True,
                      seed=3).run().status == "complete"  # fmt: skip
     full = tmp_path / "full.h5"

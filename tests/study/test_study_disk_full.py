@@ -24,23 +24,13 @@ from daq.store.repair import repair_run
 from protocols.left_open import files_left_open
 from protocols.study import cell_table, load_study
 from protocols.studyfile import StudyFileError, StudyStore, read_study
-
-
-def _free(monkeypatch: pytest.MonkeyPatch, *values: int) -> None:
-    """The disk's free bytes, in turn (the last one from then on)."""
-    calls: list[int] = []
-
-    def free(path: object) -> int:
-        calls.append(1)
-        return values[min(len(calls), len(values)) - 1]
-
-    monkeypatch.setattr(disk_space, "free_bytes", free)
+from tests.engine.helpers import fake_free_space
 
 
 def test_a_study_on_a_disk_without_room_is_refused_before_anything_is_written(
     tiny_study: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys
 ) -> None:
-    _free(monkeypatch, disk_space.MARGIN_BYTES - 1)
+    fake_free_space(monkeypatch, disk_space.MARGIN_BYTES - 1)
     out = tmp_path / "s.h5"
     assert main(["study", str(tiny_study), "--workers", "0", "--out", str(out), "-q"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
@@ -52,14 +42,14 @@ def test_a_disk_that_fills_stops_the_study_every_task_kept_and_the_same_command_
     tiny_study: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys, serial_reference
 ) -> None:
     big = 10**12
-    _free(monkeypatch, big, big, big, disk_space.MARGIN_BYTES - 1)  # room for two tasks
+    fake_free_space(monkeypatch, big, big, big, disk_space.MARGIN_BYTES - 1)  # room for two tasks
     out = tmp_path / "s.h5"
     assert main(["study", str(tiny_study), "--workers", "0", "--out", str(out), "-q"]) == 1
     err = capsys.readouterr().err
     assert "is full" in err and "6 cell(s) kept" in err and "run the study again" in err
     part = read_study(out)
     assert part.attrs["status"] == "failed" and int(np.sum(part.status != 0)) == 6
-    _free(monkeypatch, big)
+    fake_free_space(monkeypatch, big)
     assert main(["study", str(tiny_study), "--workers", "0", "--out", str(out), "-q"]) == 0
     ref, full = read_study(serial_reference), read_study(out)
     for name in ref.metrics:
