@@ -26,7 +26,7 @@ import threading
 from pathlib import Path
 from typing import Any
 
-from daq.store.lock import FileInUse, RunFileLock
+from daq.store.lock import FileInUse, LockNotWritable, RunFileLock
 
 __all__ = ["InstrumentInUse", "InstrumentLocks", "lock_instruments"]
 
@@ -110,6 +110,8 @@ def lock_instruments(addresses: dict[str, str]) -> InstrumentLocks:
                     lock, count = _InstrumentLock(path, f"the {role} {address}"), 0
                     try:
                         lock.acquire()
+                    except LockNotWritable as exc:  # the cache folder: connect says so
+                        raise exc.cause from None
                     except FileInUse as exc:
                         raise InstrumentInUse(str(exc)) from None
                 _HELD[path] = (lock, count + 1)

@@ -40,7 +40,7 @@ try:
 except ImportError:  # not on Windows: a takeover there is checked without the flock
     fcntl = None  # type: ignore[assignment]
 
-__all__ = ["FileInUse", "RunFileLock", "in_use_by", "lock_path", "read_lock"]
+__all__ = ["FileInUse", "LockNotWritable", "RunFileLock", "in_use_by", "lock_path", "read_lock"]
 
 #: an empty or unreadable lock younger than this (s, by its modification time) may still be
 #: being written by an older version of this module; it is waited for, then taken over
@@ -58,6 +58,16 @@ def _write_synced(fd: int, content: bytes) -> None:
 
 class FileInUse(RuntimeError):
     """Another live process writes the run file (one line, names it)."""
+
+
+class LockNotWritable(FileInUse):
+    """The lock cannot be written beside the file (its folder is read-only to this user): a
+    writer is refused as for a file in use, in one line naming the folder. ``cause``: the
+    system's error."""
+
+    def __init__(self, message: str, cause: OSError) -> None:
+        super().__init__(message)
+        self.cause = cause
 
 
 def lock_path(path: str | Path) -> Path:
@@ -105,7 +115,19 @@ class RunFileLock:
         }
 
     def acquire(self) -> RunFileLock:
-        """Take the lock or raise :class:`FileInUse` naming the process that holds it."""
+        """Take the lock or raise :class:`FileInUse` naming the process that holds it
+        (:class:`LockNotWritable` where the lock cannot be written at all)."""
+        try:
+            return self._acquire()
+        except OSError as exc:  # the folder read-only to this user, or gone
+            raise LockNotWritable(
+                f"{self.path}: cannot write its lock {self.lock.name} in {self.lock.parent} "
+                f"({exc.strerror or exc}); whatever writes the file needs that folder "
+                "writable (or copy the file to a folder you can write)",
+                exc,
+            ) from None
+
+    def _acquire(self) -> RunFileLock:
         self.lock.parent.mkdir(parents=True, exist_ok=True)
         self._remove_dead_temps()
         content = json.dumps(self._info()).encode()
