@@ -18,6 +18,7 @@ import math
 from pathlib import Path
 
 from daq.cli.biafc import CliError
+from daq.cli.out_check import can_write
 
 __all__ = ["add_arguments", "run"]
 
@@ -58,6 +59,9 @@ def run(args: argparse.Namespace) -> int:
     except CalibrationError as exc:
         raise CliError(str(exc)) from None
     data, spec = read_run_and_chain(path, args.chain)
+    can_write(args.out or path.with_name(f"{path.stem}_fitted_chain.yaml"), "--out")
+    if args.figures is not None:
+        can_write(args.figures, "--figures")
     try:
         result = calibrate(data, names, chain_spec=spec, nonlinear=args.nonlinear)
     except CalibrationError as exc:

@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from daq.cli.biafc import CliError
+from daq.cli.out_check import can_write
 
 if TYPE_CHECKING:
     from protocols.studyfile import StudyData
@@ -116,6 +117,7 @@ def _alpha_sweep(args: argparse.Namespace) -> int:
             raise CliError("--cycles: must be > 0")
         kwargs["cycles"] = float(args.cycles)
     out = args.out or Path("alpha_sweep_figures")
+    can_write(out, "--out")
     try:
         result = alpha_sweep.run_alpha_sweep(**kwargs)  # type: ignore[arg-type]
     except ValueError as exc:
@@ -155,6 +157,7 @@ def run(args: argparse.Namespace) -> int:
     from analysis.report import write_figures
 
     out = args.out or path.with_name(f"{path.stem}_figures")
+    can_write(out, "--out")
     try:
         report = write_figures(data, out)
     except ValueError as exc:
@@ -215,6 +218,7 @@ def _study_figures(args: argparse.Namespace, path: Path, data: StudyData) -> int
     )
 
     out = args.out or path.with_name(f"{path.stem}_figures")
+    can_write(out, "--out")
     fixed = _parse_fix(args.fix, str(data.attrs.get("amplitude_kind", "displacement")))
     done = int((data.status != 0).sum())
     print(f"{path}: study {data.attrs.get('name')}, {done} of {data.n_cells} cells run "

@@ -19,6 +19,7 @@ from typing import Any, Literal
 import numpy as np
 
 from daq.cli.biafc import CliError
+from daq.cli.out_check import can_write
 from instruments.burst import NAMED_BURSTS
 from instruments.units import UnitError, parse_quantity
 
@@ -87,6 +88,7 @@ def run(args: argparse.Namespace) -> int:
     run_path = out / "regime.h5"
     if run_path.exists():
         raise CliError(f"--out: {run_path} exists already")
+    can_write(out, "--out")  # before the model runs, not after
     try:
         spec = dem.load_chain_with_settings(args.chain, args.settings)
     except dem.ChainFileError as exc:

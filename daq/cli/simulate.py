@@ -23,6 +23,7 @@ from typing import Any, Literal
 import numpy as np
 
 from daq.cli.biafc import CliError
+from daq.cli.out_check import can_write
 from instruments.burst import NAMED_BURSTS
 from instruments.units import UnitError, parse_quantity
 from sim_backend.dem.step_limit import StepTooLargeError
@@ -155,6 +156,8 @@ def run(args: argparse.Namespace) -> int:
         raise CliError("--out: required (or --explain to print the scene's plan only)")
     if args.out is not None and args.out.exists():
         raise CliError(f"--out: {args.out} exists already")
+    if args.out is not None:
+        can_write(args.out, "--out")  # before the model runs, not after
     try:
         spec = dem.load_chain_with_settings(args.chain, args.settings)
     except dem.ChainFileError as exc:

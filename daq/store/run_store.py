@@ -24,6 +24,7 @@ import numpy as np
 
 from daq.store.recover import clear_consistency_flags
 from daq.store.resume_check import bench_differences
+from daq.store.writable import cannot_write
 from protocols.bench import BenchFile
 from protocols.legacy import upgrade_protocol_text
 from protocols.one_line import first_line
@@ -108,36 +109,9 @@ def check_output_path(path: Path, *, resume: bool = False) -> None:
                 f"--resume {path}, or write a new file (--out {_free_name(path)})"
             )
         raise StoreError(f"--out: {path} {why}; write a new file (--out {_free_name(path)})")
-    parent = path.parent if str(path.parent) else Path(".")
-    probe = parent
-    while not probe.exists():
-        probe = probe.parent
-    if not probe.is_dir():
-        raise StoreError(f"--out: cannot write {path}: {probe} is a file, not a folder")
-    if not os.access(probe, os.W_OK | os.X_OK):
-        raise StoreError(f"--out: cannot write in {probe} (permission denied)")
-    cannot = _cannot_create_in(probe)
-    if cannot is not None:
-        raise StoreError(
-            f"--out: cannot write {path}: nothing can be created in {probe} ({cannot})"
-        )
-
-
-def _cannot_create_in(folder: Path) -> str | None:
-    """Why no file can be created in ``folder`` (tried with a temporary file, removed at
-    once: ``os.access`` says yes to root everywhere, also in ``/proc``), or ``None``."""
-    import tempfile
-
-    try:
-        fd, name = tempfile.mkstemp(prefix=".biafc-probe-", dir=folder)
-    except OSError as exc:
-        return exc.strerror or str(exc)
-    os.close(fd)
-    try:
-        os.unlink(name)
-    except OSError:
-        pass
-    return None
+    problem = cannot_write(path, "--out")
+    if problem is not None:
+        raise StoreError(problem)
 
 
 def create_run(

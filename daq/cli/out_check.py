@@ -1,0 +1,19 @@
+"""The one check every writing command makes before its work: can it write where it was told
+(:func:`daq.store.writable.cannot_write`)? A refusal is a :class:`~daq.cli.biafc.CliError`:
+one line, exit 2."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from daq.cli.biafc import CliError
+from daq.store.writable import cannot_write
+
+__all__ = ["can_write"]
+
+
+def can_write(target: Path, flag: str) -> None:
+    """Refuse (one line) when ``target``, named by option ``flag``, cannot be written."""
+    problem = cannot_write(Path(target), flag)
+    if problem is not None:
+        raise CliError(problem)
