@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from daq.cli.biafc import CliError
+from daq.cli.out_check import can_write
 from instruments.units import UnitError, parse_quantity
 
 SCENE_CHOICES = ("linear", "highamp", "both")
@@ -166,6 +167,7 @@ def run(args: argparse.Namespace) -> int:
         parent = args.plot.parent if str(args.plot.parent) else Path(".")
         if not parent.is_dir():
             raise CliError(f"--plot: folder {parent} does not exist")
+        can_write(args.plot, "--plot")  # before the runs, not after
     reports = []
     total = len(scenes) * accuracy_runs(quick=args.quick)
     with ProgressDisplay(total, unit="run", label="biafc accuracy", stream=sys.stderr) as bar:

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from daq.cli.biafc import CliError
+from daq.cli.out_check import can_write
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -39,6 +40,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from sim_backend import dem
 
+    if args.csv:
+        can_write(args.csv, "--csv")  # before the table, not after it
     try:
         spec = dem.load_chain_with_settings(args.chain, args.settings)
     except dem.ChainFileError as exc:

@@ -42,6 +42,8 @@ COMMANDS = [
     ["regime", "--out", "reg", "--count", "3"],
     ["compare", "run.h5"],
     ["calibrate", "run.h5"],
+    ["accuracy", "--quick", "--plot", "work.png"],
+    ["bands", "--csv", "bands.csv"],
 ]
 
 
