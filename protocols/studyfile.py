@@ -46,7 +46,7 @@ from protocols.finish_open import not_closed, open_to_finish
 from protocols.left_open import leave_open
 from protocols.one_line import first_line
 from protocols.study import METRICS, PARAMETERS, CellTable
-from protocols.studyformat import FORMAT, FORMAT_VERSION, StudyFileError
+from protocols.studyformat import FORMAT, FORMAT_VERSION, DamagedCellsError, StudyFileError
 
 __all__ = [
     "FORMAT",
@@ -366,7 +366,7 @@ def _unreadable(path: Path, exc: BaseException) -> StudyFileError:
         damaged = []
     if damaged:
         n = sum(b - a for a, b in damaged)
-        return StudyFileError(
+        return DamagedCellsError(
             f"{path}: the results of {n} cell(s) fail their checksum (damaged on disk; the "
             f"other cells are intact): {shown(damaged)}; biafc repair {path} clears them, and "
             "the study run again computes them"

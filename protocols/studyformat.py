@@ -5,7 +5,7 @@ pydantic): 0.15-0.18 s that every ``biafc figures`` of a run file paid."""
 
 from __future__ import annotations
 
-__all__ = ["FORMAT", "FORMAT_VERSION", "StudyFileError"]
+__all__ = ["FORMAT", "FORMAT_VERSION", "DamagedCellsError", "StudyFileError"]
 
 #: the root's ``format`` attribute of a study output
 FORMAT = "biafc-study"
@@ -15,3 +15,8 @@ FORMAT_VERSION = 1
 
 class StudyFileError(ValueError):
     """A study output that cannot be used (one line: the file and why)."""
+
+
+class DamagedCellsError(StudyFileError):
+    """Results of some cells fail their checksum (damaged on disk); the rest of the output
+    reads. ``biafc repair`` clears them (:mod:`protocols.damaged_cells`)."""

@@ -15,6 +15,7 @@ the same ``biafc study`` command again to continue it), every finished cell kept
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -35,6 +36,7 @@ from protocols.runfile import (
     read_run,
 )
 from protocols.studyfile import StudyData, StudyFileError, read_study
+from protocols.studyformat import DamagedCellsError
 
 __all__ = ["RepairReport", "repair_run"]
 
@@ -122,10 +124,10 @@ def repair_run(path: str | Path) -> RepairReport:
         try:
             data = _read(path)
         except DamagedRecordsError:  # points damaged on disk: cleared, to be measured again
-            status_first = _clear_damaged_records(path, actions)
+            status_first = _clear_damaged(path, actions, _clear_records)
             data = _read(path)
-        except _DamagedCells:  # a study's cells damaged on disk: cleared, to be run again
-            status_first = _clear_damaged_study(path, actions)
+        except DamagedCellsError:  # a study's cells damaged on disk: cleared, to be run again
+            status_first = _clear_damaged(path, actions, _clear_cells)
             data = _read(path)
         if isinstance(data, StudyData):
             return _repair_study(path, data, actions, status_first)
@@ -179,59 +181,47 @@ def _study_counts(data: StudyData) -> tuple[int, int, int]:
 
 def _read(path: Path) -> RunData | StudyData:
     """The whole file, once (a damaged one waits its grace once: protocols.outputfile); one
-    line when it does not read, but records damaged on disk
-    (:class:`~protocols.runfile.DamagedRecordsError`) pass."""
-    from protocols.damaged_cells import damaged_cells
-
+    line when it does not read, but records or cells damaged on disk
+    (:class:`~protocols.runfile.DamagedRecordsError`,
+    :class:`~protocols.studyformat.DamagedCellsError`) pass."""
     try:
         return read_output(path, spectra=False)
-    except DamagedRecordsError:
+    except (DamagedRecordsError, DamagedCellsError):
         raise
     except StudyFileError as exc:
-        try:
-            damaged = damaged_cells(path)
-        except (OSError, RunFileError, KeyError):
-            damaged = []
-        if damaged:
-            raise _DamagedCells() from None
         raise StoreError(f"{path} is not a readable biafc study output ({exc})") from None
     except (OSError, RunFileError) as exc:
         raise StoreError(f"{path} is not a readable biafc run file ({exc})") from None
 
 
-class _DamagedCells(Exception):
-    """A study output whose per-cell results fail their checksum somewhere."""
-
-
-def _clear_damaged_study(path: Path, actions: list[str]) -> str:
-    """As :func:`_clear_damaged_records`, for a study output's cells
-    (:mod:`protocols.damaged_cells`)."""
-    from protocols.damaged_cells import clear_damaged_cells
-
+def _clear_damaged(path: Path, actions: list[str], clear: Callable[[Path], str | None]) -> str:
+    """Clear what ``clear`` finds damaged on disk in ``path`` (run records or study cells),
+    after a killed writer's flags (each noted in ``actions``). Returns the file's status
+    before."""
     if has_consistency_flags(path) and clear_consistency_flags(path):
         actions.append("cleared the open-for-write flags of a killed writer")
     with h5py.File(path, "r") as f:
         status = str(f.attrs.get("status", ""))
-    line = clear_damaged_cells(path)
+    line = clear(path)
     if line is not None:
-        actions.append(line)
+        actions.append(line.removeprefix("repaired: "))
     return status
 
 
-def _clear_damaged_records(path: Path, actions: list[str]) -> str:
-    """Clear the points of run file ``path`` whose records fail their checksum
-    (:mod:`protocols.damaged_records`), after clearing a killed writer's flags (each noted in
-    ``actions``). Returns the file's status before."""
+def _clear_records(path: Path) -> str:
+    """:mod:`protocols.damaged_records`: the points of run file ``path`` whose records fail
+    their checksum, cleared to be measured again."""
     from protocols.damaged_records import clear_damaged_points, damaged_points
 
-    damaged = damaged_points(path)
-    if has_consistency_flags(path) and clear_consistency_flags(path):
-        actions.append("cleared the open-for-write flags of a killed writer")
-    with h5py.File(path, "r") as f:
-        status = str(f.attrs.get("status", ""))
-    line = clear_damaged_points(path, damaged)
-    actions.append(line.removeprefix("repaired: "))
-    return status
+    return clear_damaged_points(path, damaged_points(path))
+
+
+def _clear_cells(path: Path) -> str | None:
+    """:mod:`protocols.damaged_cells`: the cells of study output ``path`` whose results fail
+    their checksum, cleared to be run again."""
+    from protocols.damaged_cells import clear_damaged_cells
+
+    return clear_damaged_cells(path)
 
 
 def _repair_study(
