@@ -19,7 +19,10 @@ import sys
 from collections.abc import Callable
 from typing import Any
 
-__all__ = ["CLOSE_EVENTS", "ConsoleCloseHold", "hold_console_close"]
+__all__ = ["CLOSE_BOUND_S", "CLOSE_EVENTS", "ConsoleCloseHold", "hold_console_close"]
+
+#: how long a handler may hold the process (s): Windows ends it about 5 s after a close event
+CLOSE_BOUND_S = 4.5
 
 #: ``CTRL_CLOSE_EVENT``, ``CTRL_LOGOFF_EVENT``, ``CTRL_SHUTDOWN_EVENT`` (wincon.h): name of each
 CLOSE_EVENTS = {2: "console window closed", 5: "user logged off", 6: "system shutting down"}

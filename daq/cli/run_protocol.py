@@ -182,10 +182,9 @@ class _Interrupted(KeyboardInterrupt):
 #: state follows at once
 ABORT_BOUND_S = 5.0
 
-#: a closing console window (Windows): Windows ends the process about 5 s after it tells it, so
-#: the abort is forced after this long (s) and the handler gives up at :data:`CLOSE_BOUND_S`
+#: a closing console window (Windows): the abort is forced after this long (s), and the handler
+#: gives up at :data:`daq.cli.console_close.CLOSE_BOUND_S`
 CLOSE_GRACE_S = 2.0
-CLOSE_BOUND_S = 4.5
 
 
 def _leave_the_terminal() -> None:
@@ -243,7 +242,10 @@ class _SignalGate:
         """Windows' handler thread, the console window closing (or a log-off, a shutdown):
         Windows ends the process when this returns, or after about 5 s. As SIGHUP: the output
         to the null device and the run aborted; then wait until its outcome is written, the
-        abort forced after :data:`CLOSE_GRACE_S`, for :data:`CLOSE_BOUND_S` in all."""
+        abort forced after :data:`CLOSE_GRACE_S`, for
+        :data:`~daq.cli.console_close.CLOSE_BOUND_S` in all."""
+        from daq.cli.console_close import CLOSE_BOUND_S
+
         _leave_the_terminal()
         if not self.ran:
             return  # nothing driven yet: nothing to put in a safe state

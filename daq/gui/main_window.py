@@ -26,6 +26,7 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
+from daq.cli.console_close import CLOSE_BOUND_S
 from daq.gui import gui_gc, refcount_guard
 from daq.gui.adapter import EngineEventAdapter
 from daq.gui.background import BackgroundCall
@@ -38,10 +39,6 @@ __all__ = ["Assembler", "MainWindow"]
 
 #: builds the instruments of a bench file (default: :func:`daq.connect.connect_bench`)
 Assembler = Callable[[Any, "int | None"], Any]
-
-#: how long a closing console (Windows) waits for a run's safe state (s): Windows ends the
-#: process about 5 s after it tells it
-CONSOLE_CLOSE_BOUND_S = 4.5
 
 #: how long the window waits for a run's safe state when its display is gone (s): as long as
 #: a window closed during a run waits
@@ -573,7 +570,7 @@ class MainWindow(QMainWindow):
             self.log(f"aborting: {reason}", "warning")
             self.engine.abort(reason)
 
-    def console_closed(self, what: str, bound_s: float = CONSOLE_CLOSE_BOUND_S) -> None:
+    def console_closed(self, what: str, bound_s: float = CLOSE_BOUND_S) -> None:
         """Windows' console handler thread, not the window's (:mod:`daq.cli.console_close`):
         the console the window was started from is closing, and Windows ends the process when
         this returns. A run is aborted, and this waits for its safe state and file, at most

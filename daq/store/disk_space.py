@@ -23,6 +23,8 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
+from daq.store.writable import nearest_existing
+
 __all__ = [
     "MARGIN_BYTES",
     "DiskFull",
@@ -51,14 +53,10 @@ def point_bytes(samples: int) -> int:
 def free_bytes(path: str | Path) -> int | None:
     """Free bytes for an unprivileged writer on the disk of ``path`` (a file, or where it will
     be: its nearest existing folder), ``None`` where that cannot be asked."""
-    p = Path(path).absolute()
-    for folder in (p, *p.parents):
-        if folder.exists():
-            try:
-                return shutil.disk_usage(folder).free
-            except OSError:
-                return None
-    return None
+    try:
+        return shutil.disk_usage(nearest_existing(Path(path).absolute())).free
+    except OSError:
+        return None
 
 
 def _mb(n: float) -> str:

@@ -12,7 +12,15 @@ import os
 import tempfile
 from pathlib import Path
 
-__all__ = ["cannot_create_in", "cannot_write"]
+__all__ = ["cannot_create_in", "cannot_write", "nearest_existing"]
+
+
+def nearest_existing(path: Path) -> Path:
+    """``path`` itself, or its nearest ancestor that exists (``.`` for a bare relative name)."""
+    for folder in (path, *path.parents):
+        if folder.exists():
+            return folder
+    return Path(".")  # a relative path whose every ancestor is missing: the working folder
 
 
 def cannot_create_in(folder: Path) -> str | None:
@@ -34,11 +42,7 @@ def cannot_write(target: Path, flag: str) -> str | None:
     """Why the file or folder ``target`` (``flag``: the option that named it, e.g. ``--out``)
     cannot be made: its nearest existing folder is a file, or cannot be written (one line), or
     ``None``."""
-    probe = target.parent if str(target.parent) else Path(".")
-    if target.is_dir():
-        probe = target
-    while not probe.exists():
-        probe = probe.parent
+    probe = nearest_existing(target if target.is_dir() else target.parent)
     if not probe.is_dir():
         return f"{flag}: cannot write {target}: {probe} is a file, not a folder"
     if not os.access(probe, os.W_OK | os.X_OK):

@@ -15,8 +15,7 @@ from typing import Any
 
 import pytest
 
-from daq.cli import run_protocol as rp
-from daq.cli.console_close import CLOSE_EVENTS, hold_console_close
+from daq.cli.console_close import CLOSE_BOUND_S, CLOSE_EVENTS, hold_console_close
 from daq.cli.stop_signals import stop_signals
 from protocols.runfile import PointState, read_run
 
@@ -109,7 +108,7 @@ def test_a_closed_console_window_aborts_safely_before_windows_ends_the_process(
     done = subprocess.run(cmd, cwd=TESTS, env=env, capture_output=True, text=True, timeout=120)
     assert done.returncode == 99, done.stderr[-2000:]  # ended by "Windows", after the handler
     returned, seconds, outputs = report.read_text().split(" ", 2)
-    assert returned == "1" and float(seconds) < rp.CLOSE_BOUND_S
+    assert returned == "1" and float(seconds) < CLOSE_BOUND_S
     assert outputs == "OUTPUTS {1: False, 2: False}\n"  # the safe state, before the end
     run = read_run(out)
     measured = sum(int((s.done == PointState.DONE).sum()) for s in run.scans.values())
