@@ -14,6 +14,7 @@ from types import MappingProxyType
 from typing import Any
 
 from sim_backend.simbench.actuator import ActuatorModel
+from sim_backend.simbench.dem_cache import CACHE_BYTES, CACHE_RUNS
 from sim_backend.simbench.faults import FaultPlan
 
 __all__ = ["DIRECTIONS", "SimWorldConfig"]
@@ -116,8 +117,8 @@ class SimWorldConfig:
     dem_sample_rate_Hz: float | None = None
     dem_integrator: str = "default"
     dem_dt_s: float | None = None
-    dem_cache_size: int = 1024
-    dem_cache_MB: float = 512.0
+    dem_cache_size: int = CACHE_RUNS
+    dem_cache_MB: float = CACHE_BYTES / 2**20
 
     def __post_init__(self) -> None:
         self._check_direction_channel()

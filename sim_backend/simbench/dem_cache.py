@@ -22,10 +22,20 @@ from typing import Any, Literal, cast
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["CACHE_BYTES", "DemKey", "DemRecord", "DemRunner", "DemStats", "waveform_digest"]
+__all__ = [
+    "CACHE_BYTES",
+    "CACHE_RUNS",
+    "DemKey",
+    "DemRecord",
+    "DemRunner",
+    "DemStats",
+    "waveform_digest",
+]
 
 #: the most bytes of DEM records the cache keeps (the newest record is kept whatever its size)
 CACHE_BYTES = 512 * 2**20
+#: the most DEM records the cache keeps
+CACHE_RUNS = 1024
 
 
 @dataclass(frozen=True)
@@ -100,7 +110,7 @@ class DemRunner:
     used of the others goes first (:meth:`_evictable`)."""
 
     def __init__(
-        self, simulator: Simulator, cache_size: int = 1024, cache_bytes: int = CACHE_BYTES
+        self, simulator: Simulator, cache_size: int = CACHE_RUNS, cache_bytes: int = CACHE_BYTES
     ) -> None:
         self._simulate = simulator
         self._cache: OrderedDict[DemKey, DemRecord] = OrderedDict()
