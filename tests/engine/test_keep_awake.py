@@ -14,12 +14,17 @@ import pytest
 
 from daq.engine import RunEngine
 from daq.engine import engine as engine_module
-from daq.engine.keep_awake import ES_CONTINUOUS, ES_SYSTEM_REQUIRED, keep_awake
+from daq.engine.keep_awake import keep_awake
 from protocols.bench import load_bench
 
 from .fakes import FakeWorld, fake_bench
 
 ROOT = Path(__file__).resolve().parents[2]
+
+
+#: SetThreadExecutionState's flags as Microsoft documents them (winbase.h), not the module's
+ES_CONTINUOUS = 0x80000000
+ES_SYSTEM_REQUIRED = 0x00000001
 
 
 class Kernel32:
