@@ -144,7 +144,9 @@ def build_drivers(
     vibrometer = polytec.PolytecVibrometer(
         transports["vibrometer"],
         polytec.PolytecSettings(
-            min_signal_level=b.vibrometer.min_signal_level, commands=b.vibrometer.commands
+            min_signal_level=b.vibrometer.min_signal_level,
+            level_full_scale=b.vibrometer.level_full_scale,
+            commands=b.vibrometer.commands,
         ),
     )
     stage = zaber.ZaberStage(transports["stage"], stage_settings(b, clock))

@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from daq.engine.instruments import BenchInstruments
+from instruments.errors import ReplyError
 from protocols.bench import BenchFile
 
 __all__ = [
@@ -184,7 +185,21 @@ def _vibrometer(bf: BenchFile, vib: Any) -> list[Finding]:
             "info",
         )
     )
-    level = float(vib.signal_level())
+    try:
+        level = float(vib.signal_level())
+    except ReplyError as exc:  # above the bench's level_full_scale: the findings above stand
+        out.append(
+            Finding(
+                "vibrometer",
+                "signal level here",
+                f"level_full_scale {b.vibrometer.level_full_scale:g}",
+                str(exc).splitlines()[0].split(": ", 1)[-1].split(" (vibrometer.")[0],
+                "MISMATCH",
+                "set vibrometer.level_full_scale (or commands: signal_level_get) for this "
+                "controller",
+            )
+        )
+        return out
     out.append(
         Finding(
             "vibrometer",

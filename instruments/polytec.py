@@ -164,7 +164,9 @@ class PolytecSettings:
         Entries of :data:`DEFAULT_COMMANDS` that differ on this controller (e.g. the decoder's
         number); a key not in the table is refused.
     level_full_scale:
-        Full scale of the signal-level reading (level / full scale = 0..1).
+        Full scale of the signal-level reading (level / full scale = 0..1); a reading above
+        it is a :class:`ReplyError`, not clipped to 1 (the scale is not in Polytec's public
+        command list: the bench file gives it).
     min_signal_level:
         Below this (0..1) :meth:`PolytecVibrometer.check_signal` raises
         :class:`SignalLostError`.
@@ -306,7 +308,14 @@ class PolytecVibrometer:
             raise ReplyError(
                 f"{self.transport.name}: signal level {raw!r} is not a number"
             ) from None
-        return min(max(value / s.level_full_scale, 0.0), 1.0)
+        if value > s.level_full_scale:
+            # clipping it to 1 would pass every point on a controller with a larger scale
+            raise ReplyError(
+                f"{self.transport.name}: signal level {raw} is above the full scale "
+                f"{s.level_full_scale:g} (vibrometer.level_full_scale in the bench file): set "
+                "it to this controller's reading with the beam on a good target"
+            )
+        return max(value / s.level_full_scale, 0.0)
 
     def check_signal(self) -> float:
         """The signal level; :class:`SignalLostError` below ``min_signal_level``."""

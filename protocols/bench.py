@@ -144,6 +144,9 @@ class VibrometerSpec(_Model):
     resource: str
     range: str = "VD-09 10mm/s/V"
     min_signal_level: float = Field(default=0.2, ge=0, le=1)
+    #: the controller's signal-level reading on a good target (its full scale); a reading
+    #: above it is refused, not clipped
+    level_full_scale: float = Field(default=100.0, gt=0, le=1e6)
     timeout: Duration = 2.0
     baud_rate: int = Field(default=SERIAL_BAUD_DEFAULT, gt=0)
     #: RS-232 command table entries that differ on this controller (see instruments.polytec)

@@ -10,7 +10,8 @@ With echo on (:attr:`echo`, on by default here: the strict case) every received 
 back before any reply. An item that does not exist answers ``Not Available``.
 The signal level is ``Get,SignalLevel,0,Value``, an integer: the device ``SignalLevel`` is not in
 the manual's public command list; this is the form two independent third-party programs for an
-OFV-5000 with a VD-09 read. Its scale (0..100 here) is this emulator's assumption.
+OFV-5000 with a VD-09 read. Its scale is not documented: ``level_scale`` is the reading at a
+full signal (100 by default here; one of those programs draws 775 as its bar's full scale).
 
 State for the world: :attr:`range_name` (``"VD-09 50mm/s/V"``), :attr:`delay_s`,
 :meth:`sensitivity_m_per_s_per_V`, :attr:`signal_level` (0..1, settable). Faults:
@@ -49,6 +50,7 @@ class PolytecEmulator:
         echo: bool = True,
         controller: str = "OFV-5000",
         head: str = "OFV-534",
+        level_scale: int = 100,
     ) -> None:
         decoder, _, value = range_name.partition(" ")
         if decoder != "VD-09" or value.replace(" ", "") not in VD09_RANGES:
@@ -60,6 +62,8 @@ class PolytecEmulator:
         #: line speed (baud) the device listens at; 115200 as shipped
         self.baud_rate = BAUD_RATE
         self.signal_level = 0.8
+        #: the integer read at a full signal (``signal_level`` 1.0)
+        self.level_scale = level_scale
         #: the decoder's signal delay (s), settable
         self.decoder_delay_s = VD09_DELAY_S
         self.controller = controller
@@ -87,7 +91,7 @@ class PolytecEmulator:
         if device == "Controller" and index == "0":
             return {"Name": self.controller, "Version": "2.4"}.get(item)
         if device == "SignalLevel" and index == "0":
-            return str(round(self.signal_level * 100)) if item == "Value" else None
+            return str(round(self.signal_level * self.level_scale)) if item == "Value" else None
         if device == "SensorHead" and index == "0":
             return {"Name": self.head, "Version": "1.1", "AutoFocusResult": "Found"}.get(item)
         if device == "Interface" and index == "0":

@@ -250,6 +250,8 @@ CASES: tuple[Case, ...] = (
        ("bench.yaml", "speed")),
     _b("vibrometer_range", "vibrometer range VD-09 5000mm/s/V", "range: VD-09 50mm/s/V",
        "range: VD-09 5000mm/s/V", ("bench.yaml", "range", "1, 2, 5, 10, 20, 50, 100 mm/s/V")),
+    _b("level_full_scale_0", "vibrometer level_full_scale: 0", "min_signal_level: 0.2",
+       "min_signal_level: 0.2\n  level_full_scale: 0", ("bench.yaml", "level_full_scale")),
     _b("sample_rate_0_unit", "generator sample_rate: 0 Sa/s", "sample_rate: 1 MSa/s",
        "sample_rate: 0 Sa/s", ("bench.yaml", "generator.sample_rate")),
     _b("bench_name_newline", "a line break in the bench's name", "name: simulated bench",

@@ -7,6 +7,7 @@ import pytest
 
 import daq.connect
 from daq.connect import connect_bench
+from instruments.errors import ReplyError
 from instruments.interfaces import Digitiser, FunctionGenerator, Stage, Vibrometer
 from protocols.bench import default_bench_path, load_bench
 
@@ -71,3 +72,22 @@ def test_a_missing_driver_is_one_line(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(instruments.transport, "open_transport", lambda *a, **k: None)
     with pytest.raises(daq.connect.ConnectError, match=r"daq\.digitiser_nidaq\.NidaqDigitiser"):
         connect_bench(ROOT / "lab_bench.yaml")
+
+
+def test_the_bench_files_level_full_scale_reaches_the_vibrometer(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """``vibrometer.level_full_scale`` (a controller reading 0-775, say) is what the driver
+    divides by; before, the bench file refused the key and the driver kept 100."""
+    text = default_bench_path().read_text()
+    assert "level_full_scale" not in text
+    text = text.replace("vibrometer:\n", "vibrometer:\n  level_full_scale: 775\n", 1)
+    path = tmp_path / "bench.yaml"
+    path.write_text(text)
+    bench = connect_bench(path)
+    emulated = bench.world._inst.vibrometer  # type: ignore[union-attr]
+    emulated.level_scale = 775
+    level = bench.vibrometer.signal_level()  # the world sets the emulator's level as it reads
+    assert 0.2 < level < 1 and level == pytest.approx(emulated.signal_level, abs=1 / 775)
+    default = connect_bench()
+    default.world._inst.vibrometer.level_scale = 775  # type: ignore[union-attr]
+    with pytest.raises(ReplyError, match=r"above the full scale 100 \(vibrometer\.level_full"):
+        default.vibrometer.signal_level()

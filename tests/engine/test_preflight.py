@@ -79,6 +79,29 @@ def test_check_names_a_deliberate_mismatch(
     assert "2 mismatch(es)" in cap.err
 
 
+def test_check_names_a_signal_level_above_the_bench_files_full_scale(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A controller whose level reads up to 775 against the bench file's 100: a mismatch naming
+    the field, the vibrometer's other findings kept (before, the bench file could not name the
+    scale and the driver clipped every level above it to 1.0)."""
+
+    def larger_scale(bench: Any) -> None:
+        bench.world._inst.vibrometer.level_scale = 775
+
+    _connected(monkeypatch, larger_scale)
+    assert main(["check"]) == 1
+    cap = capsys.readouterr()
+    lines = [ln for ln in cap.out.splitlines() if re.match(r"MISMATCH \S", ln)]
+    assert len(lines) == 1, cap.out
+    assert re.match(
+        r"MISMATCH vibrometer signal level here: signal level \d+ is above the full scale 100 "
+        r"\(bench file: level_full_scale 100\): set vibrometer\.level_full_scale",
+        lines[0],
+    ), lines[0]
+    assert "VD-09 50mm/s/V" in cap.out  # the range's finding still shown
+
+
 def test_check_move_fires_one_burst_and_leaves_the_bench_safe(
     capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:

@@ -117,3 +117,23 @@ def test_controller_without_an_echo_setting_connects() -> None:
     v = PolytecVibrometer(t, PolytecSettings(commands={"echo_set": None}))
     assert v.connect() == "OFV-5000 / OFV-534"  # no Set,Interface,... sent; no firmware
     assert t.done and v._firmware is None
+
+
+def test_a_level_above_the_full_scale_is_refused_not_clipped() -> None:
+    """The signal level's scale is not in Polytec's public command list. Before, a reading above
+    ``level_full_scale`` was clipped to 1, so on a controller whose scale is larger every level
+    read as full and no point ever saw a lost signal; the bench file could not even set it."""
+    t = ScriptedTransport(
+        [("Get,SignalLevel,0,Value", "620"), ("Get,SignalLevel,0,Value", "620")],
+        name="vibrometer",
+    )
+    with pytest.raises(
+        ReplyError,
+        match=r"vibrometer: signal level 620 is above the full scale 100 "
+        r"\(vibrometer\.level_full_scale in the bench file\)",
+    ):
+        PolytecVibrometer(t).check_signal()
+    assert PolytecVibrometer(t, PolytecSettings(level_full_scale=775)).check_signal() == (
+        pytest.approx(0.8)
+    )
+    assert t.done
