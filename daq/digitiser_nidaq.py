@@ -202,7 +202,12 @@ class NidaqDigitiser:
         nidaqmx = self._nidaqmx
         constants = nidaqmx.constants
         terminal = getattr(constants.TerminalConfiguration, TERMINAL_CONFIGS[self.terminal_config])
-        task = nidaqmx.Task()
+        try:
+            task = nidaqmx.Task()
+        except Exception as exc:  # NI-DAQmx itself refused (its service, its memory)
+            raise InstrumentError(
+                f"NI-DAQ {self.device}: cannot create a task: {self._explain(exc, config)}"
+            ) from None
         try:
             for chan, rng in (
                 (config.velocity_channel, config.velocity_range_V),

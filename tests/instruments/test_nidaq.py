@@ -156,6 +156,17 @@ def test_daq_errors_name_the_device_the_channel_and_what_to_check(card: Card) ->
     assert "\n" not in msg
 
 
+def test_a_task_nidaqmx_cannot_create_is_one_line_naming_the_device(card: Card) -> None:
+    """``nidaqmx.Task()`` raises a DaqError when the driver cannot make a task; before, that
+    escaped ``configure`` raw (a traceback from the run) instead of an InstrumentError."""
+    dig = digitiser(card)
+    card.refuse_new_tasks = ("Resource requested by this task has already been reserved.", -50103)
+    with pytest.raises(InstrumentError, match=r"NI-DAQ Dev1: cannot create a task: .*-50103"):
+        dig.configure(config())
+    card.refuse_new_tasks = None
+    assert dig.configure(config()) == pytest.approx(100e3)
+
+
 def test_a_cleared_task_is_never_used_again(card: Card) -> None:
     dig = digitiser(card)
     dig.configure(config())

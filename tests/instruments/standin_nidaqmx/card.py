@@ -40,6 +40,9 @@ class Card:
     tasks: list[Task] = field(default_factory=list)
     #: every (time, terminal) edge fired, and which tasks took it
     edges: list[tuple[float, str, int]] = field(default_factory=list)
+    #: (message, code) of a DaqError that ``Task()`` raises, as DAQmxCreateTask does when the
+    #: driver cannot make one; None: tasks are created
+    refuse_new_tasks: tuple[str, int] | None = None
 
     # the Clock protocol (instruments.clock), so the driver can wait on the card's time
     def now(self) -> float:

@@ -38,6 +38,8 @@ class Task:
     _count = 0
 
     def __init__(self, new_task_name: str = "") -> None:
+        if _card.CARD.refuse_new_tasks is not None:
+            raise DaqError(*_card.CARD.refuse_new_tasks)
         Task._count += 1
         self._card = _card.CARD
         self._name = new_task_name or f"_unnamedTask<{Task._count}>"
@@ -322,7 +324,7 @@ class _Timing:
         rate: float,
         source: str = "",
         active_edge: Edge = Edge.RISING,
-        sample_mode: AcquisitionType = AcquisitionType.CONTINUOUS,
+        sample_mode: AcquisitionType = AcquisitionType.FINITE,
         samps_per_chan: int = 1000,
     ) -> None:
         task = self._task
