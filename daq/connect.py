@@ -73,7 +73,8 @@ def sim_world_config(
         )
         plan = FaultPlan.from_mapping(dict(faults if faults is not None else sim.faults))
     except ValueError as exc:
-        raise bf.doc.error(("simulation", "faults"), str(exc)) from None
+        raise bf.doc.error(("simulation", "faults"), str(exc).removeprefix("faults: ")) from None
+    cache: dict[str, Any] = {} if sim.dem_cache_MB is None else {"dem_cache_MB": sim.dem_cache_MB}
     try:
         return SimWorldConfig(
             chain_spec=chain_spec(bf),
@@ -96,9 +97,12 @@ def sim_world_config(
             faults=plan,
             dem_duration_s=sim.dem_duration,
             dem_integrator=sim.dem_integrator,
+            **cache,
         )
-    except ValueError as exc:
-        raise bf.doc.error(("simulation",), str(exc)) from None
+    except ValueError as exc:  # named by the config's field: the bench's where the two agree
+        key = str(exc).split(":", 1)[0]
+        path = ("simulation", key) if key in type(sim).model_fields else ("simulation",)
+        raise bf.doc.error(path, str(exc).removeprefix(f"{key}: ")) from None
 
 
 def _import(module: str, name: str) -> Any:

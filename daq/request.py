@@ -137,6 +137,10 @@ def validate_request(
         assert pf is not None and bf is not None
         if bf.bench.chain_set:
             chain_spec(bf)  # a bad chain setting is refused before anything runs
+        if bf.bench.simulated:
+            from daq.connect import sim_world_config
+
+            sim_world_config(bf)  # its faults and integrator, as the run would build them
         plan = make_plan(pf, bf)
         target = _target(pf, out, resume)
         changes: list[str] = []

@@ -152,6 +152,18 @@ class VibrometerSpec(_Model):
     #: RS-232 command table entries that differ on this controller (see instruments.polytec)
     commands: dict[str, str | None] = Field(default_factory=dict)
 
+    @field_validator("commands")
+    @classmethod
+    def _known_commands(cls, v: dict[str, str | None]) -> dict[str, str | None]:
+        from instruments.errors import LimitError
+        from instruments.polytec import PolytecSettings
+
+        try:
+            PolytecSettings(commands=v)  # the driver's own table refuses an unknown entry
+        except LimitError as exc:
+            raise ValueError(str(exc).removeprefix("vibrometer commands: ")) from None
+        return v
+
     @field_validator("range")
     @classmethod
     def _known_range(cls, v: str) -> str:
@@ -254,6 +266,8 @@ class SimulationSpec(_Model):
     adc_bits: int = Field(default=16, ge=1, le=32)
     dem_duration: Duration = 30.0e-3
     dem_integrator: str = "default"
+    #: the most MB of DEM runs the simulated bench keeps (None: its default, 512)
+    dem_cache_MB: float | None = Field(default=None, gt=0, le=1e6)
     faults: dict[str, Any] = Field(default_factory=dict)
 
     BOUNDS: ClassVar[dict[str, Bound]] = {

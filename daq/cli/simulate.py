@@ -26,6 +26,7 @@ from daq.cli.biafc import CliError
 from daq.cli.out_check import can_write
 from instruments.burst import NAMED_BURSTS
 from instruments.units import UnitError, parse_quantity
+from sim_backend.dem.integrators import integrator_error
 from sim_backend.dem.step_limit import StepTooLargeError
 
 #: the paper's input frequencies
@@ -162,8 +163,9 @@ def run(args: argparse.Namespace) -> int:
         spec = dem.load_chain_with_settings(args.chain, args.settings)
     except dem.ChainFileError as exc:
         raise CliError(str(exc)) from None
-    if args.integrator != "default" and args.integrator not in dem.INTEGRATORS:
-        raise CliError(f"--integrator: choose from {', '.join(sorted(dem.INTEGRATORS))}")
+    why = integrator_error(args.integrator)
+    if why is not None:
+        raise CliError(f"--integrator: {why}")
     chain = dem.build_chain(spec)
     if not 1 <= args.bands <= chain.n_modes + 1:
         raise CliError(f"--bands: must be in 1..{chain.n_modes + 1}")

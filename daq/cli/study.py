@@ -59,6 +59,7 @@ def run(args: argparse.Namespace) -> int:
     from protocols.study import cell_table, load_study
     from protocols.studyfile import StudyFileError, StudyStore
     from protocols.yamlfile import ConfigError
+    from sim_backend.dem.integrators import integrator_error
     from sim_backend.dem.spec import ChainFileError, default_chain_spec, load_chain_spec
 
     if args.workers is not None and args.workers < 0:
@@ -70,6 +71,9 @@ def run(args: argparse.Namespace) -> int:
     except ConfigError as exc:
         raise CliError(str(exc)) from None
     study = sf.study
+    why = integrator_error(study.simulation.integrator)
+    if why is not None:  # before: every cell failed at its first model run
+        raise CliError(str(sf.error(("simulation", "integrator"), why)))
     try:
         base = load_chain_spec(sf.chain_path) if sf.chain_path else default_chain_spec()
     except ChainFileError as exc:

@@ -17,6 +17,7 @@ from sim_backend.dem.chain import Chain
 from sim_backend.dem.defaults import DEFAULT_DT_S, DEFAULT_DT_TOP_HZ, DEFAULT_INTEGRATOR
 from sim_backend.dem.drive import Drive
 from sim_backend.dem.errors import step_doubling_error
+from sim_backend.dem.integrators import INTEGRATORS, integrator_error
 from sim_backend.dem.kernel import drift_coefficients, run_batch
 from sim_backend.dem.kernel_cache import compile_notice, remove_stale_compiled
 from sim_backend.dem.step_limit import StepTooLargeError, check_step
@@ -32,44 +33,13 @@ __all__ = [
     "StepTooLargeError",
     "block_modes",
     "default_step_s",
+    "integrator_error",
     "simulate",
     "steps_per_sample",
 ]
 
-_W1 = 1.0 / (2.0 - 2.0 ** (1.0 / 3.0))
-_W0 = 1.0 - 2.0 * _W1
-_Z1 = 1.0 / (2.0 - 2.0 ** (1.0 / 5.0))
-_Z0 = 1.0 - 2.0 * _Z1
-_P = 1.0 / (4.0 - 4.0 ** (1.0 / 3.0))
-
-
-def _from_strang(gamma: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """(drift weights a [m+1], kick weights b [m]) of a composition of Strang steps gamma."""
-    m = len(gamma)
-    a = [0.5 * gamma[0]]
-    a += [0.5 * (gamma[k - 1] + gamma[k]) for k in range(1, m)]
-    a += [0.5 * gamma[-1]]
-    return tuple(a), tuple(gamma)
-
-
-# Blanes & Moan, J. Comput. Appl. Math. 142 (2002) 313, Table 2: S6, order 4, 6 kicks
-_BM_A = (0.0792036964311957, 0.353172906049774, -0.0420650803577195)
-_BM_B = (0.209515106613362, -0.143851773179818)
-_BM4 = (
-    (*_BM_A, 1.0 - 2.0 * sum(_BM_A), *_BM_A[::-1]),
-    (*_BM_B, 0.5 - sum(_BM_B), 0.5 - sum(_BM_B), *_BM_B[::-1]),
-)
-
-#: symmetric splittings D(a0 h) K(b0 h) D(a1 h) ... K(b_{m-1} h) D(a_m h):
-#: name -> (order, drift weights a, kick weights b)
-INTEGRATORS: dict[str, tuple[int, tuple[float, ...], tuple[float, ...]]] = {
-    "strang": (2, *_from_strang((1.0,))),
-    "yoshida4": (4, *_from_strang((_W1, _W0, _W1))),
-    "suzuki4": (4, *_from_strang((_P, _P, 1.0 - 4.0 * _P, _P, _P))),
-    "blanes-moan4": (4, *_BM4),
-    "yoshida6": (6, *_from_strang(tuple(z * w for z in (_Z1, _Z0, _Z1) for w in (_W1, _W0, _W1)))),
-}
 DEFAULT_SAMPLE_RATE_HZ = 500.0e3
+
 #: quantities :func:`simulate` can record
 RECORDABLE = ("velocity", "displacement", "drive")
 _RECORD_BITS = {"velocity": 1, "displacement": 2, "drive": 4}
@@ -274,9 +244,10 @@ def simulate(
         (an O(h) error with the contact dashpot on), for comparison.
     """
     t_wall = time.perf_counter()
+    why = integrator_error(integrator)
+    if why is not None:
+        raise ValueError(why)
     name = DEFAULT_INTEGRATOR if integrator == "default" else integrator
-    if name not in INTEGRATORS:
-        raise ValueError(f"unknown integrator {integrator!r}; choose from {sorted(INTEGRATORS)}")
     if not (math.isfinite(duration_s) and duration_s > 0):
         raise ValueError(f"duration_s must be > 0, got {duration_s!r}")
     if not (math.isfinite(sample_rate_Hz) and sample_rate_Hz > 0):

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any
 
+from sim_backend.dem.integrators import integrator_error
 from sim_backend.simbench.actuator import ActuatorModel
 from sim_backend.simbench.dem_cache import CACHE_BYTES, CACHE_RUNS
 from sim_backend.simbench.faults import FaultPlan
@@ -175,6 +176,9 @@ class SimWorldConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
                 raise ValueError(f"{name} must be an integer in [{lo}, {hi}], got {value!r}")
+        why = integrator_error(self.dem_integrator)
+        if why is not None:
+            raise ValueError(f"dem_integrator: {why}")
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
             raise ValueError(f"seed must be a non-negative integer, got {self.seed!r}")
         if not isinstance(self.trigger_terminal, str) or not self.trigger_terminal:

@@ -250,6 +250,24 @@ CASES: tuple[Case, ...] = (
        ("bench.yaml", "speed")),
     _b("vibrometer_range", "vibrometer range VD-09 5000mm/s/V", "range: VD-09 50mm/s/V",
        "range: VD-09 5000mm/s/V", ("bench.yaml", "range", "1, 2, 5, 10, 20, 50, 100 mm/s/V")),
+    _b("sim_integrator", "simulation dem_integrator: bogus (before: --dry-run passed, the run "
+       "wrote a failed file)", "dem_duration: 30 ms",
+       "dem_duration: 30 ms\n  dem_integrator: bogus",
+       ("bench.yaml", "simulation.dem_integrator", "unknown integrator 'bogus'", "blanes-moan4")),
+    _b("sim_fault_typo", "an unknown fault name (before: passed --dry-run, refused at connect)",
+       "faults: {}", "faults: {trigger_cabel: true}",
+       ("bench.yaml", "simulation.faults", "trigger_cabel", "digitiser_timeout")),
+    _b("vibrometer_command_typo", "an unknown vibrometer command entry (before: passed "
+       "--dry-run, refused at connect without a line)", "min_signal_level: 0.2",
+       'min_signal_level: 0.2\n  commands: {signal_levle_get: "Get,SignalLevel,0,Value"}',
+       ("bench.yaml", "vibrometer.commands", "signal_levle_get", "signal_level_get")),
+    _b("dem_cache_MB_0", "simulation dem_cache_MB: 0", "dem_duration: 30 ms",
+       "dem_duration: 30 ms\n  dem_cache_MB: 0", ("bench.yaml", "dem_cache_MB")),
+    Case("study_integrator", "study simulation integrator: bogus (before: every cell failed, "
+         "exit 4)", ("biafc", "study", "study.yaml", "--out", "study.h5"),
+         ("study.yaml", "simulation.integrator", "unknown integrator 'bogus'"),
+         {"study.yaml": (REPO / "protocols" / "studies" / "example.yaml").read_text(
+             encoding="utf-8").replace("rate: 200 kS/s}", "rate: 200 kS/s, integrator: bogus}")}),
     _b("level_full_scale_0", "vibrometer level_full_scale: 0", "min_signal_level: 0.2",
        "min_signal_level: 0.2\n  level_full_scale: 0", ("bench.yaml", "level_full_scale")),
     _b("sample_rate_0_unit", "generator sample_rate: 0 Sa/s", "sample_rate: 1 MSa/s",

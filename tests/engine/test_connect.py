@@ -91,3 +91,14 @@ def test_the_bench_files_level_full_scale_reaches_the_vibrometer(tmp_path) -> No
     default.world._inst.vibrometer.level_scale = 775  # type: ignore[union-attr]
     with pytest.raises(ReplyError, match=r"above the full scale 100 \(vibrometer\.level_full"):
         default.vibrometer.signal_level()
+
+
+def test_the_bench_files_dem_cache_MB_reaches_the_simulated_bench(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """docs/performance.md names ``dem_cache_MB`` as the simulated bench's cache bound; before,
+    a bench file could not set it (unknown key)."""
+    text = default_bench_path().read_text()
+    text = text.replace("  dem_duration: 30 ms\n", "  dem_duration: 30 ms\n  dem_cache_MB: 64\n", 1)
+    path = tmp_path / "bench.yaml"
+    path.write_text(text)
+    assert connect_bench(path).world.config.dem_cache_MB == 64  # type: ignore[union-attr]
+    assert connect_bench().world.config.dem_cache_MB == 512  # type: ignore[union-attr]
