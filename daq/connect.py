@@ -244,18 +244,21 @@ def _connect_hardware(b: BenchSpec, chain: Any, locks: Any) -> BenchInstruments:
             name="generator",
             timeout_s=b.generator.timeout,
             baud_rate=b.generator.baud_rate,
+            visa_backend=b.visa_backend,
         ),
         "vibrometer": open_transport(
             b.vibrometer.resource,
             name="vibrometer",
             timeout_s=b.vibrometer.timeout,
             baud_rate=b.vibrometer.baud_rate,
+            visa_backend=b.visa_backend,
         ),
         "stage": open_transport(
             b.stage.resource,
             name="stage",
             timeout_s=b.stage.timeout,
             baud_rate=b.stage.baud_rate,
+            visa_backend=b.visa_backend,
         ),
     }
     generator, vibrometer, stage = build_drivers(b, transports)

@@ -294,6 +294,9 @@ class BenchSpec(_Model):
 
     name: str
     simulated: bool = False
+    #: the VISA library for VISA resources: "@py" pyvisa-py (shipped), "@ivi" the NI-VISA or
+    #: Keysight IO Libraries installed on the PC (their USB and GPIB drivers)
+    visa_backend: Literal["@py", "@ivi"] = "@py"
     chain: str | None = None  # chain file (sim_backend.dem) relative to the bench file
     # KEY=VALUE settings applied to that chain (``diameter=12mm``), validated like the chain file
     chain_set: list[str] = Field(default_factory=list)

@@ -32,15 +32,18 @@ def open_transport(
     name: str = "instrument",
     timeout_s: float = 5.0,
     baud_rate: int | None = None,
+    visa_backend: str = "@py",
     **settings: Any,
 ) -> Transport:
     """Open ``resource`` on pyvisa or pyserial.
 
     ``baud_rate`` sets the line speed of a serial port or of a VISA ``ASRL`` resource (VISA
     defaults to 9600 baud; Zaber ASCII and the Polytec OFV-5000 ship at 115200; ``None``: the
-    transport's default). ``settings`` go to :class:`~instruments.transport.visa.VisaTransport`
-    (``backend``, terminations) or :class:`~instruments.transport.serial_port.SerialTransport`
-    (``parity``...). An empty or unknown resource raises :class:`InstrumentError` naming it.
+    transport's default). ``visa_backend`` is the VISA library of a VISA resource (``"@py"``
+    pyvisa-py, ``"@ivi"`` an installed NI-VISA or Keysight IO Libraries). ``settings`` go to
+    :class:`~instruments.transport.visa.VisaTransport` (terminations) or
+    :class:`~instruments.transport.serial_port.SerialTransport` (``parity``...). An empty or
+    unknown resource raises :class:`InstrumentError` naming it.
     """
     if not isinstance(resource, str) or not resource.strip():
         raise InstrumentError(f"{name}: empty instrument resource {resource!r}")
@@ -50,7 +53,12 @@ def open_transport(
         from instruments.transport.visa import VisaTransport
 
         return VisaTransport(
-            resource, name=name, timeout_s=timeout_s, baud_rate=baud_rate, **settings
+            resource,
+            name=name,
+            timeout_s=timeout_s,
+            baud_rate=baud_rate,
+            backend=visa_backend,
+            **settings,
         )
     from instruments.transport.serial_port import SerialTransport
 

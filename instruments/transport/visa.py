@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+import sys
 from typing import Any
 
 from instruments.errors import DriverNotInstalledError, InstrumentError, InstrumentTimeout
@@ -10,6 +12,24 @@ from instruments.transport.block import encode_block
 __all__ = ["VisaTransport"]
 
 _CHECK = "check that the instrument is on, its address in the bench file and the cable or network"
+
+
+def _open_hint(resource: str, backend: str, why: str) -> str | None:
+    """What to change when pyvisa-py cannot open ``resource`` for a reason of its own."""
+    if backend != "@py":
+        return None
+    if "PyUSB" in why or "pyusb" in why:
+        return (
+            "pyvisa-py opens USB instruments only with pyusb and libusb installed "
+            "(pip install pyusb); or set visa_backend: '@ivi' in the bench file to use the "
+            "NI-VISA or Keysight IO Libraries of this PC"
+        )
+    if re.fullmatch(r"ASRL\d+::INSTR", resource.strip().upper()) and sys.platform != "win32":
+        return (
+            "pyvisa-py reads ASRLn as COMn on Windows only: here name the port itself "
+            "(ASRL/dev/ttyUSB0::INSTR, or just /dev/ttyUSB0)"
+        )
+    return None
 
 
 class VisaTransport:
@@ -63,7 +83,8 @@ class VisaTransport:
             self._res: Any = res
         except Exception as exc:  # pyvisa raises several types for a bad/unknown resource
             raise InstrumentError(
-                f"{self.name}: cannot open VISA resource ({exc}); {_CHECK}"
+                f"{self.name}: cannot open VISA resource ({exc}); "
+                + (_open_hint(resource, backend, str(exc)) or _CHECK)
             ) from None
         self.timeout_s = float(timeout_s)
         self._res.read_termination = read_termination
@@ -71,6 +92,19 @@ class VisaTransport:
         if baud_rate is not None:
             self._res.baud_rate = int(baud_rate)
         self._write_term = write_termination.encode()
+        import pyvisa.constants as vc
+
+        ops = vc.BufferOperation
+        #: a serial line keeps a late reply in its receive buffer, to answer the next query;
+        #: pyvisa-py's serial session empties it on ``discard_read_buffer`` only, NI-VISA
+        #: without I/O on the read and receive buffers (viFlush)
+        self._discard: int | None = (
+            None
+            if not resource.upper().startswith("ASRL")
+            else int(ops.discard_read_buffer)
+            if backend == "@py"
+            else int(ops.discard_read_buffer_no_io | ops.discard_receive_buffer)
+        )
 
     @property
     def timeout_s(self) -> float:
@@ -119,6 +153,11 @@ class VisaTransport:
         self._call(command, self._res.write, command)
 
     def query(self, command: str) -> str:
+        if self._discard is not None:  # a stale line must not answer this query
+            try:
+                self._res.flush(self._discard)
+            except Exception:
+                pass
         return str(self._call(command, self._res.query, command)).strip()
 
     def write_block(self, header: str, data: bytes) -> None:

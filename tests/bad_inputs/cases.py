@@ -268,6 +268,8 @@ CASES: tuple[Case, ...] = (
          ("study.yaml", "simulation.integrator", "unknown integrator 'bogus'"),
          {"study.yaml": (REPO / "protocols" / "studies" / "example.yaml").read_text(
              encoding="utf-8").replace("rate: 200 kS/s}", "rate: 200 kS/s, integrator: bogus}")}),
+    _b("visa_backend", 'visa_backend: "@ni" (not a VISA library the bench knows)',
+       "simulated: true", 'simulated: true\nvisa_backend: "@ni"', ("bench.yaml", "visa_backend")),
     _b("level_full_scale_0", "vibrometer level_full_scale: 0", "min_signal_level: 0.2",
        "min_signal_level: 0.2\n  level_full_scale: 0", ("bench.yaml", "level_full_scale")),
     _b("sample_rate_0_unit", "generator sample_rate: 0 Sa/s", "sample_rate: 1 MSa/s",

@@ -3,13 +3,15 @@ bench and the lab bench go through the same driver construction, from the same f
 
 from __future__ import annotations
 
+from typing import Any
+
 import pytest
 
 import daq.connect
 from daq.connect import connect_bench
 from instruments.errors import ReplyError
 from instruments.interfaces import Digitiser, FunctionGenerator, Stage, Vibrometer
-from protocols.bench import default_bench_path, load_bench
+from protocols.bench import default_bench_path, load_bench, parse_bench
 
 from .helpers import cable_lab_bench
 
@@ -102,3 +104,26 @@ def test_the_bench_files_dem_cache_MB_reaches_the_simulated_bench(tmp_path) -> N
     path.write_text(text)
     assert connect_bench(path).world.config.dem_cache_MB == 64  # type: ignore[union-attr]
     assert connect_bench().world.config.dem_cache_MB == 512  # type: ignore[union-attr]
+
+
+def test_the_bench_files_visa_backend_reaches_every_transport(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """``visa_backend: "@ivi"`` (the NI-VISA or Keysight IO Libraries of the PC); before, every
+    VISA resource opened on pyvisa-py whatever the PC had."""
+    import instruments.transport
+
+    cable_lab_bench(monkeypatch)
+    seen: list[str] = []
+    opened = instruments.transport.open_transport
+
+    def record(resource: str, **kw: Any) -> Any:
+        seen.append(kw["visa_backend"])
+        return opened(resource, **kw)
+
+    monkeypatch.setattr(instruments.transport, "open_transport", record)
+    text = (
+        (ROOT / "lab_bench.yaml").read_text().replace('visa_backend: "@py"', 'visa_backend: "@ivi"')
+    )
+    connect_bench(parse_bench(text, str(ROOT / "lab_bench.yaml")))
+    assert seen == ["@ivi"] * 3

@@ -109,8 +109,12 @@ def test_dead_link_is_an_instrument_error_naming_instrument_resource_and_what_to
 
 
 def test_visa_open_failure_and_asrl_baud_rate() -> None:
-    with pytest.raises(InstrumentError, match=r"generator \(ASRL3::INSTR\): cannot open.*check"):
-        VisaTransport("ASRL3::INSTR", name="generator", resource_manager=Manager(OSError("gone")))
+    with pytest.raises(
+        InstrumentError, match=r"generator \(ASRL/dev/ttyS3::INSTR\): cannot open.*check"
+    ):
+        VisaTransport(
+            "ASRL/dev/ttyS3::INSTR", name="generator", resource_manager=Manager(OSError("gone"))
+        )
     res = DyingResource(OSError())
     VisaTransport(
         "ASRL3::INSTR", name="vibrometer", baud_rate=115200, resource_manager=Manager(res)

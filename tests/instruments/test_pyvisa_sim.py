@@ -16,7 +16,7 @@ RESOURCE = "TCPIP::10.0.0.5::INSTR"
 
 @pytest.fixture()
 def generator() -> KeysightGenerator:
-    t = open_transport(RESOURCE, name="generator", timeout_s=0.5, backend=f"{YAML}@sim")
+    t = open_transport(RESOURCE, name="generator", timeout_s=0.5, visa_backend=f"{YAML}@sim")
     return KeysightGenerator(t, GeneratorLimits(max_piezo_V=150.0, amplifier_gain=20.0))
 
 
@@ -41,7 +41,7 @@ def test_terminations_and_safe_state(generator: KeysightGenerator) -> None:
 def test_unknown_resource_is_a_clear_error() -> None:
     # pyvisa-sim opens any address but nothing answers there: the identity check refuses it
     t = open_transport(
-        "TCPIP::10.9.9.9::INSTR", name="generator", timeout_s=0.2, backend=f"{YAML}@sim"
+        "TCPIP::10.9.9.9::INSTR", name="generator", timeout_s=0.2, visa_backend=f"{YAML}@sim"
     )
     gen = KeysightGenerator(t, GeneratorLimits(max_piezo_V=150.0, amplifier_gain=20.0))
     with pytest.raises(InstrumentError, match=r"generator \(TCPIP::10.9.9.9::INSTR\)"):

@@ -1,0 +1,93 @@
+"""A late reply on a serial line over the real pyvisa-py (an ``ASRL`` resource on a pseudo
+terminal): it must not answer the next query. The far end is written here from the OFV-5000's
+RS-232 description (one reply line per ``Get``, ``\\n``-terminated), not from the driver.
+
+Before, ``VisaTransport.query`` sent and read without discarding what waited on the line (the
+pyserial transport did): after one timeout every reply came one query late, so
+``velocity_range()`` read the signal level (``'512 VD-09'``)."""
+
+from __future__ import annotations
+
+import os
+import select
+import sys
+import threading
+import time
+
+import pytest
+
+from instruments.errors import InstrumentError, InstrumentTimeout
+from instruments.polytec import PolytecVibrometer
+from instruments.transport import open_transport
+
+pytestmark = pytest.mark.skipif(
+    sys.platform == "win32" or not hasattr(os, "openpty"), reason="needs a pseudo terminal"
+)
+
+REPLIES = {b"Get,VeloDec,1,Name": b"VD-09\n", b"Get,VeloDec,1,Range": b"50mm/s/V\n"}
+LATE_S = 0.8  # the signal level's reply comes after the driver's 0.5 s timeout
+
+
+def _controller(fd: int, stop: threading.Event) -> None:
+    buf = b""
+    while not stop.is_set():
+        ready, _, _ = select.select([fd], [], [], 0.02)
+        if not ready:
+            continue
+        buf += os.read(fd, 4096)
+        while b"\n" in buf:
+            line, buf = buf.split(b"\n", 1)
+            line = line.rstrip(b"\r")
+            if line == b"Get,SignalLevel,0,Value":
+                time.sleep(LATE_S)
+                os.write(fd, b"512\n")
+            elif line in REPLIES:
+                os.write(fd, REPLIES[line])
+
+
+def test_a_late_reply_on_a_visa_serial_line_does_not_answer_the_next_query() -> None:
+    pytest.importorskip("pyvisa_py")
+    import tty
+
+    far, near = os.openpty()
+    tty.setraw(near)
+    stop = threading.Event()
+    thread = threading.Thread(target=_controller, args=(far, stop), daemon=True)
+    thread.start()
+    transport = open_transport(
+        f"ASRL{os.ttyname(near)}::INSTR", name="vibrometer", timeout_s=0.5, baud_rate=115200
+    )
+    try:
+        vib = PolytecVibrometer(transport)
+        with pytest.raises(InstrumentTimeout):
+            vib.signal_level()
+        time.sleep(LATE_S)  # the late "512" now waits on the line
+        assert vib.velocity_range() == "VD-09 50mm/s/V"
+        assert vib.velocity_range() == "VD-09 50mm/s/V"
+    finally:
+        stop.set()
+        thread.join(2)
+        transport.close()
+        os.close(far)
+        os.close(near)
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="ASRL3 is COM3 there")
+def test_an_asrl_number_off_windows_names_the_port_form_that_works() -> None:
+    """pyvisa-py turns ``ASRL3::INSTR`` into COM3 on Windows only; elsewhere it tried a port
+    named "3" and the error said only to check the cable."""
+    pytest.importorskip("pyvisa_py")
+    with pytest.raises(InstrumentError, match=r"ASRL/dev/ttyUSB0::INSTR, or just /dev/ttyUSB0"):
+        open_transport("ASRL3::INSTR", name="vibrometer", timeout_s=0.5)
+
+
+def test_a_usb_resource_without_pyusb_says_what_to_install_or_use() -> None:
+    pytest.importorskip("pyvisa_py")
+    try:
+        import usb  # noqa: F401
+    except ImportError:
+        pass
+    else:
+        pytest.skip("pyusb is installed here")
+    with pytest.raises(InstrumentError, match=r"pip install pyusb\); or set visa_backend: '@ivi'"):
+        open_transport("USB0::0x0957::0x2807::MY57000001::INSTR", name="generator")
