@@ -349,12 +349,18 @@ class KeysightGenerator:
         w(f"SOUR{n}:VOLT:LIM:HIGH {req.limit_high_V:.6g}")
         w(f"SOUR{n}:VOLT:LIM:LOW {req.limit_low_V:.6g}")
         w(f"SOUR{n}:VOLT:LIM:STAT ON")
-        w(f"SOUR{n}:VOLT:OFFS {req.offset_V:.6g}")
+        # offset 0 first: the old amplitude with the new offset could cross a limit (the
+        # instrument then clips it and reports a conflict); the limits are symmetric
+        w(f"SOUR{n}:VOLT:OFFS 0")
         w(f"SOUR{n}:VOLT {req.amplitude_Vpp:.6g}")
+        if req.offset_V != 0:
+            w(f"SOUR{n}:VOLT:OFFS {req.offset_V:.6g}")
         w(f"SOUR{n}:BURS:MODE {req.burst_mode}")
         w(f"SOUR{n}:BURS:NCYC {req.burst_cycles}")
-        w(f"SOUR{n}:BURS:STAT ON")
+        # the trigger source before the burst goes on, as the guide orders it: under the
+        # default immediate trigger a burst longer than the 10 ms period is a conflict
         w(f"TRIG{n}:SOUR {req.trigger_source}")
+        w(f"SOUR{n}:BURS:STAT ON")
         w(f"OUTP:TRIG:SOUR CH{n}")
         w(f"OUTP:TRIG:SLOP {req.trigger_out_slope}")
         w("OUTP:TRIG ON")

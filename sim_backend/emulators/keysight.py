@@ -16,7 +16,10 @@ numbers in NR3 with 15 decimals (``+1.000000000000000E+00``; ``OUTPn:LOAD?`` ans
 From the guide's "Output Termination": the load is 1 ohm to 10 kohm or INF (default 50 ohm);
 changing it rescales the displayed amplitude and offset without an error (50 ohm -> INF
 doubles them); units become Vpp at high Z; and the load cannot be changed while the voltage
-limits are on (here: -221 "Settings conflict", the setting kept).
+limits are on (here: -221 "Settings conflict", the setting kept). From its "BURSt Subsystem":
+with an immediate trigger a burst longer than the burst period (``BURS:INT:PER``, 10 ms after a
+reset) raises the period to fit and reports "Settings conflict" (checked here as the burst,
+its trigger source or its period is set).
 
 ``strict=True`` coerces instead of refusing, like the instrument: an amplitude or offset outside
 what the load allows (at 50 ohm 1 mVpp to 10 Vpp, |offset| + Vpp/2 <= 5 V; twice that at high
@@ -115,6 +118,8 @@ class ChannelState:
     burst_mode: str = "TRIG"
     burst_cycles: int = 1
     burst_on: bool = False
+    #: ``BURS:INT:PER`` (s), used with an immediate trigger; 10 ms after a reset
+    burst_period_s: float = 10.0e-3
     trigger_source: str = "IMM"
 
     @property
@@ -375,6 +380,16 @@ class KeysightEmulator:
             if query:
                 return "1" if ch.burst_on else "0"
             ch.burst_on = self._bool(arg)
+            self._fit_burst_period(ch)
+            return None
+        if key == "BURS:INT:PER":
+            if query:
+                return _nr3(ch.burst_period_s)
+            x = self._number(arg)
+            if not 1e-6 <= x <= 8000.0:
+                raise ScpiError(-222, "Data out of range")
+            ch.burst_period_s = x
+            self._fit_burst_period(ch)
             return None
         if key == "TRIG:SOUR":
             if query:
@@ -384,6 +399,7 @@ class KeysightEmulator:
             if v not in ("BUS", "EXT", "IMM", "TIM"):
                 raise ScpiError(-224, "Illegal parameter value")
             ch.trigger_source = v
+            self._fit_burst_period(ch)
             return None
         if key == "OUTP:TRIG:SOUR":
             m = re.fullmatch(r"CH(\d)", arg.upper())
@@ -406,6 +422,16 @@ class KeysightEmulator:
             self.trigger_out_on = self._bool(arg)
             return None
         raise ScpiError(-113, "Undefined header")
+
+    def _fit_burst_period(self, ch: ChannelState) -> None:
+        """The guide's "BURSt Subsystem": with an immediate trigger, a burst period too short for
+        the burst's cycles is increased to fit them, and "Settings conflict" is reported."""
+        if not (ch.burst_on and ch.trigger_source == "IMM" and ch.function == "ARB"):
+            return
+        burst_s = ch.burst_cycles * ch.waveform.size / ch.sample_rate_Hz
+        if burst_s > ch.burst_period_s:
+            ch.burst_period_s = burst_s
+            self.push_error(-221, "Settings conflict;burst period increased to fit entire burst")
 
     def _volt(self, ch: ChannelState, key: str, x: float) -> None:
         """``VOLT`` (Vpp) or ``VOLT:OFFS`` (V) at the present load: refused out of range (-222,

@@ -128,3 +128,27 @@ def test_identity_reports_the_output_load() -> None:
     assert gen.identity()["load_ohm"] == {"1": 50.0, "2": 50.0}  # the instrument's default
     gen.configure_burst(1, BurstConfig(Burst(8920.0, cycles=5.0), amplitude_Vpp=1.0))
     assert gen.identity()["load_ohm"]["1"] == float("inf")
+
+
+def test_a_burst_longer_than_the_default_burst_period_configures_on_a_fresh_instrument() -> None:
+    """The guide's BURSt Subsystem: under the immediate trigger of a fresh instrument, a burst
+    longer than its 10 ms period raises the period and reports "Settings conflict". The driver
+    switched the burst on before setting the bus trigger, so a 25 ms burst failed its first
+    configuration; it now sets the trigger source first, as the guide orders them."""
+    gen, emu = on_emulator()
+    samples = np.sin(2 * np.pi * 1e3 * np.arange(25_000) / 1e6)  # 25 ms at 1 MSa/s
+    cfg = BurstConfig(Burst(1e3, cycles=25), amplitude_Vpp=1.0, sample_rate_Hz=1e6)
+    gen.configure_waveform(1, samples, cfg)
+    assert emu.channels[1].trigger_source == "BUS" and gen.errors() == []
+
+
+def test_an_offset_after_a_large_amplitude_is_not_clipped_by_the_old_amplitude() -> None:
+    """Offset was set before amplitude: after a 9 Vpp burst, a 3 V offset with the old 9 Vpp
+    reached 7.5 V, past the +/-5 V voltage limits (the guide: clipped, "Settings conflict"), and
+    the legal 1 Vpp + 3 V was refused. Now the offset goes to 0 before the amplitude is set."""
+    gen, emu = on_emulator()
+    samples = np.sin(2 * np.pi * 8.92e3 * np.arange(3000) / 1e6)
+    gen.configure_waveform(1, samples, BurstConfig(Burst(8.92e3, cycles=21), amplitude_Vpp=9.0))
+    cfg = BurstConfig(Burst(8.92e3, cycles=21), amplitude_Vpp=1.0, offset_V=3.0)
+    gen.configure_waveform(1, samples, cfg)
+    assert (emu.channels[1].amplitude_Vpp, emu.channels[1].offset_V) == (1.0, 3.0)
