@@ -214,12 +214,19 @@ def _vibrometer(bf: BenchFile, vib: Any) -> list[Finding]:
 
 def _stage(bf: BenchFile, stage: Any) -> list[Finding]:
     b = bf.bench
-    ident = stage.identity()  # read from the device at connect (deviceid, resolution, limits)
+    ident = stage.identity()  # read from the device at connect (id, resolution, limits)
     step = float(ident["microstep_m"])
     lo, hi = (float(v) for v in ident["travel_m"])
     named = b.stage.model or "-"
     out = [
-        Finding("stage", "model", named, f"device id {ident['device_id']}", "ok"),
+        Finding(
+            "stage",
+            "model",
+            named,
+            f"device id {ident['device_id']}"
+            + (f", firmware {ident['firmware']}" if ident.get("firmware") else ""),
+            "ok",
+        ),
         Finding(
             "stage",
             "microstep",

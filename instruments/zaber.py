@@ -4,14 +4,21 @@ Request ``/<device> <axis> <id> <command>``; reply
 ``@<device> <axis> <id> <OK|RJ> <IDLE|BUSY> <flag> <data>``, e.g. ``@01 1 07 OK IDLE -- 0``. The
 message id (0..99, the protocol's own) ties each reply to its request: a reply that arrives late,
 after its request timed out, carries the old id and is discarded instead of being taken as the
-answer to the next command. Warning flags (``--`` when none): ``WR`` no reference position
-(not homed), ``FS`` stalled and stopped, ``WL`` unexpected limit switch, ``FQ``/``FE`` encoder
-faults, ``NI`` a move was interrupted. Positions travel as microsteps; the size of one depends on
-the device (an X-LSM's is 0.047625 um at the default resolution of 64 microsteps per step). The
-bench file names the stage model or its microstep; :meth:`ZaberStage.connect` reads
-``get deviceid``, ``get resolution`` and ``get limit.min/max`` and refuses a stage that does not
-match, or whose travel does not hold the cylinder positions. Speeds travel as
-``microsteps/s x 1.6384`` (``maxspeed`` units).
+answer to the next command. A reply shows one warning flag (``--`` when none), the one of
+highest priority (faults ``F*`` before warnings ``W*`` before notices ``N*``); the command
+``warnings`` lists them all. ``WR`` no reference position (not homed), ``FS`` stalled and
+stopped, ``WL`` unexpected limit switch (both persist until ``warnings clear``), ``FD`` driver
+disabled, ``NI`` a move was interrupted. Every ``F*`` flag and ``WL`` is a fault here. Homed means
+``WR`` is not among ``warnings`` (a higher flag can hide it in a reply).
+
+Positions travel as microsteps; the size of one depends on the device (an X-LSM's is 0.047625
+um at the default resolution of 64 microsteps per step). The bench file names the stage model
+or its microstep; :meth:`ZaberStage.connect` reads the device id (``get device.id``, firmware 7;
+``get deviceid`` on firmware 6), ``get version``, ``get resolution`` and ``get limit.min/max``,
+and refuses a stage that does not match, or whose travel does not hold the cylinder positions.
+A stall or limit warning left from before (``FS``, ``WL``) is cleared at connect, logged, and
+the stage is homed again before it moves. Speeds travel as ``microsteps/s x 1.6384``
+(``maxspeed`` units).
 """
 
 from __future__ import annotations
@@ -53,8 +60,25 @@ SPEED_UNIT = 1.6384
 FULL_STEP_M: dict[str, float] = {"X-LSM": 0.047625e-6 * 64, "T-LSM": 0.047625e-6 * 64}
 _MODEL_RE = re.compile(r"^([A-Z]+-[A-Z]+?)(\d+)")
 _REPLY_RE = re.compile(r"^@(\d+)\s+(\d+)\s+(?:(\d+)\s+)?(OK|RJ)\s+(IDLE|BUSY)\s+(\S\S)\s*(.*)$")
-_FAULT_FLAGS = {"FS": "stalled and stopped", "FQ": "encoder error", "FE": "encoder fault"}
-_LIMIT_FLAGS = {"WL": "unexpected limit switch"}
+#: names of the flags this driver reports (any other ``F*`` is a fault all the same)
+_FLAG_NAMES = {
+    "FS": "stalled and stopped",
+    "FQ": "encoder error",
+    "FE": "limit error: a limit sensor cannot be reached or is faulty",
+    "FD": "driver disabled",
+    "WL": "unexpected limit switch",
+    "WR": "no reference position (not homed)",
+}
+#: events that stay flagged until ``warnings clear``
+_LATCHED = ("FS", "WL")
+
+
+def _is_fault(flag: str) -> bool:
+    return flag.startswith("F") or flag == "WL"
+
+
+def _describe(flag: str) -> str:
+    return _FLAG_NAMES.get(flag, "fault" if flag.startswith("F") else "warning")
 
 
 @dataclass(frozen=True)
@@ -120,7 +144,8 @@ class ZaberSettings:
         Microsteps per step the bench file's microstep refers to (default 64, the factory
         setting); the device's ``get resolution`` must match it.
     device_id:
-        Expected ``get deviceid`` (``None``: read and recorded, not checked).
+        Expected device id (``get device.id``, firmware 6: ``get deviceid``; ``None``: read and
+        recorded, not checked).
     message_ids:
         Send a message id with each command and take only the reply that carries it.
     soft_limits_m:
@@ -195,6 +220,8 @@ class ZaberStage:
         self._microstep_m: float | None = None
         self._identity: dict[str, Any] | None = None
         self._next_id = 0
+        #: a stall or limit warning was cleared at connect: home before the next move
+        self._must_home = False
 
     # --- wire ---------------------------------------------------------------------------
     def _message_id(self) -> int:
@@ -202,9 +229,11 @@ class ZaberStage:
         self._next_id = (self._next_id + 1) % 100
         return mid
 
-    def command(self, text: str) -> ZaberReply:
-        """Send ``/<dev> <axis> [<id>] <text>``, take the reply carrying the id; RJ -> error,
-        fault flags -> error. Stale replies (an earlier id) and info/alert lines are skipped."""
+    def command(self, text: str, *, check_flags: bool = True) -> ZaberReply:
+        """Send ``/<dev> <axis> [<id>] <text>``, take the reply carrying the id; a fault flag ->
+        :class:`StallError`, RJ -> :class:`ReplyError` naming the reason (a move refused for want
+        of a reference: :class:`NotHomedError`). Stale replies (an earlier id) and info/alert
+        lines are skipped."""
         s = self.settings
         mid = self._message_id() if s.message_ids else None
         head = f"/{s.device} {s.axis}" + (f" {mid:02d}" if mid is not None else "")
@@ -229,22 +258,30 @@ class ZaberStage:
             raise ReplyError(f"{self.transport.name}: no reply to {cmd!r} among the lines read")
         if r.device != s.device:
             raise ReplyError(f"{self.transport.name}: reply to {cmd!r} from device {r.device}")
-        self._check_flags(cmd, r)
+        rejected = "" if r.ok else f"; rejected ({r.data or 'no reason given'})"
+        if check_flags and _is_fault(r.flag):
+            raise StallError(
+                f"{self.transport.name}: {_describe(r.flag)} ({r.flag}) after {cmd!r}{rejected}"
+            )
         if not r.ok:
-            if r.flag == "WR":
+            if r.flag == "WR" and text.startswith("move"):
                 raise NotHomedError(f"{self.transport.name}: {cmd!r} rejected: stage not homed")
-            raise ReplyError(f"{self.transport.name}: {cmd!r} rejected ({r.data or r.flag})")
+            flag = "" if r.flag == "--" else f", warning {r.flag} ({_describe(r.flag)})"
+            raise ReplyError(
+                f"{self.transport.name}: {cmd!r} rejected ({r.data or 'no reason given'}{flag})"
+            )
         return r
 
-    def _check_flags(self, cmd: str, r: ZaberReply) -> None:
-        if r.flag in _FAULT_FLAGS:
-            raise StallError(
-                f"{self.transport.name}: {_FAULT_FLAGS[r.flag]} ({r.flag}) after {cmd!r}"
-            )
-        if r.flag in _LIMIT_FLAGS:
-            raise StallError(
-                f"{self.transport.name}: {_LIMIT_FLAGS[r.flag]} ({r.flag}) after {cmd!r}"
-            )
+    def warnings(self) -> list[str]:
+        """Every active warning flag (``warnings``: a count, then the flags), not only the one a
+        reply shows."""
+        r = self.command("warnings", check_flags=False)
+        words = r.data.split()
+        try:
+            count = int(words[0])
+        except (ValueError, IndexError):
+            raise ReplyError(f"{self.transport.name}: 'warnings' answered {r.data!r}") from None
+        return words[1 : 1 + count]
 
     def _get_int(self, setting: str) -> int:
         r = self.command(f"get {setting}")
@@ -262,7 +299,31 @@ class ZaberStage:
         when a position of ``positions_m`` (m) is outside the device's travel."""
         s = self.settings
         name = self.transport.name
-        device_id = self._get_int("deviceid")
+        flags = self.warnings()  # before anything that a latched flag would fail
+        latched = [f for f in flags if f in _LATCHED]
+        if latched:
+            self.command("warnings clear", check_flags=False)
+            self._must_home = True
+            log.warning(
+                "%s: cleared %s left from before (%s); the stage is homed before it moves",
+                name,
+                ", ".join(latched),
+                "; ".join(_describe(f) for f in latched),
+            )
+        faults = [f for f in flags if _is_fault(f) and f not in _LATCHED]
+        if faults:
+            raise StallError(
+                f"{name}: {', '.join(f'{f} ({_describe(f)})' for f in faults)} at connect: "
+                "check the stage and its cable (Zaber Console shows the device's state)"
+            )
+        try:  # firmware 7 names it device.id, firmware 6 deviceid
+            device_id = self._get_int("device.id")
+        except ReplyError:
+            device_id = self._get_int("deviceid")
+        try:
+            firmware: str | None = self.command("get version").data or None
+        except ReplyError:
+            firmware = None
         resolution = self._get_int("resolution")
         lo_steps = self._get_int("limit.min")
         hi_steps = self._get_int("limit.max")
@@ -311,6 +372,7 @@ class ZaberStage:
         self._device_limits_m = travel
         self._identity = {
             "device_id": device_id,
+            "firmware": firmware,
             "model": s.model,
             "resolution": resolution,
             "microstep_m": step,
@@ -342,14 +404,16 @@ class ZaberStage:
         return self.command("get pos")
 
     def is_homed(self) -> bool:
-        r = self.command("get pos")
-        return r.flag != "WR"
+        """``WR`` is not among the device's warnings, and no stall or limit warning was cleared
+        at connect since the last :meth:`home`."""
+        return "WR" not in self.warnings() and not self._must_home
 
     def home(self) -> None:
         """Home and block until idle (timeout ``home_timeout_s``)."""
         _ = self.microstep_m  # identity checked before anything moves
         self.command("home")
         self._wait_idle("home", self.settings.home_timeout_s)
+        self._must_home = False
         self._ensure_speed()
 
     def _ensure_speed(self) -> None:
@@ -444,10 +508,10 @@ class ZaberStage:
         s = self.settings
         self.transport.query(f"/{s.device} {s.axis} stop")
 
-    def clear_warnings(self) -> None:
-        """``warnings clear`` (after a handled stall/limit fault)."""
-        s = self.settings
-        self.transport.query(f"/{s.device} {s.axis} warnings clear")
+    def clear_warnings(self) -> list[str]:
+        """``warnings clear`` (after a handled stall/limit fault); the flags it cleared."""
+        r = self.command("warnings clear", check_flags=False)
+        return r.data.split()[1:]
 
     def snapshot(self) -> dict[str, Any]:
         s = self.settings

@@ -178,7 +178,7 @@ class VibrometerSpec(_Model):
 class StageSpec(_Model):
     """The stage: ``model`` (e.g. ``X-LSM500A``) and/or ``microstep`` (with units, at
     ``resolution`` microsteps per step) say how long a microstep is; checked at connect against
-    what the device reports (``get deviceid``, ``get resolution``, ``get limit.max``)."""
+    what the device reports (its id, ``get resolution``, ``get limit.max``)."""
 
     resource: str
     soft_limits: tuple[Length, Length]

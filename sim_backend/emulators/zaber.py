@@ -3,11 +3,17 @@
 Written from Zaber's ASCII protocol manual: ``/<device> <axis> [<message id>] <command>``, reply
 ``@<device> <axis> [<id>] <OK|RJ> <IDLE|BUSY> <flag> <data>`` (the id echoed when one was sent).
 The microstep is the device's own: full-step length / ``resolution`` (default 64), e.g. 0.047625
-um on an X-LSM; ``get deviceid``, ``get resolution``, ``get limit.min/max`` answer as the device.
+um on an X-LSM; ``get resolution``, ``get limit.min/max``, ``get version`` answer as the device,
+and its id as firmware 7 names it (``get device.id``; ``deviceid`` is firmware 6's name and is
+rejected) unless ``firmware=6``. Warning flags: a reply shows the one of highest priority
+(faults, then warnings, then notices); ``warnings`` lists them all (``NN F1 F2``) and
+``warnings clear`` clears those that are events (``FS`` stalled, ``WL`` unexpected limit,
+``NI``), not ``WR`` (no reference position), which only ``home`` clears.
 Serial line as shipped: 115200 baud, 8N1 (:attr:`BAUD_RATE`).
 
 State for the world: :meth:`ZaberEmulator.position_m` (at the clock's time), :attr:`homed`,
-:meth:`busy`. Faults: :meth:`stall` (stops the axis, flag FS), :meth:`lose_homing` (flag WR),
+:meth:`busy`, :attr:`flags`. Faults: :meth:`stall` (stops the axis, flag FS), :meth:`lose_homing`
+(flag WR), :meth:`raise_flag` (any flag),
 :attr:`responsive`, :attr:`late_replies` (the next n replies miss their request's timeout and
 arrive just before the reply to the following command, as after a stall of the link).
 """
@@ -19,6 +25,10 @@ from instruments.clock import Clock
 __all__ = ["STAGE_MODELS", "ZaberEmulator"]
 
 BAUD_RATE = 115200
+#: the order in which a reply shows one of several flags: faults, then warnings, then notices
+_PRIORITY = ("FD", "FQ", "FS", "FE", "WL", "WV", "WT", "WM", "WR", "NI")
+#: flags that are events, cleared by ``warnings clear``
+_EVENTS = ("FS", "WL", "NI")
 #: model -> (device id, full-step length m). The device ids are placeholders of this emulator,
 #: not Zaber's numbers; the full step is the datasheet's (X-LSM: 3.048 um = 64 x 0.047625 um).
 STAGE_MODELS: dict[str, tuple[int, float]] = {
@@ -41,6 +51,7 @@ class ZaberEmulator:
         travel_m: tuple[float, float] = (0.0, 0.5),
         speed_m_per_s: float = 0.025,
         home_position_m: float | None = None,
+        firmware: int = 7,
     ) -> None:
         self.clock = clock
         self.device = device
@@ -64,7 +75,10 @@ class ZaberEmulator:
         )
         self.responsive = True
         self.homed = False
-        self.flag = "WR"
+        #: 7: the id is ``device.id``; 6: ``deviceid``
+        self.firmware = int(firmware)
+        #: every active warning flag
+        self.flags: set[str] = {"WR"}
         self._start = (self.limit_min + self.limit_max) // 2
         self._target = self._start
         self._t0 = 0.0
@@ -88,15 +102,25 @@ class ZaberEmulator:
         return self.clock.now() < self._t1
 
     # --- faults ---------------------------------------------------------------------------
+    @property
+    def flag(self) -> str:
+        """The flag a reply shows: the active one of highest priority, ``--`` when none."""
+        ranked = sorted(self.flags, key=lambda f: _PRIORITY.index(f) if f in _PRIORITY else 0)
+        return ranked[0] if ranked else "--"
+
+    def raise_flag(self, flag: str) -> None:
+        """Raise any warning flag (e.g. ``WV``, a supply voltage out of range)."""
+        self.flags.add(flag)
+
     def stall(self) -> None:
         """Stop where it is now and raise the FS (stalled) flag."""
         self._halt()
-        self.flag = "FS"
+        self.flags.add("FS")
 
     def lose_homing(self) -> None:
         """Forget the reference position (flag WR)."""
         self.homed = False
-        self.flag = "WR"
+        self.flags.add("WR")
 
     def _halt(self) -> None:
         here = round(self._steps_now())
@@ -157,23 +181,23 @@ class ZaberEmulator:
             return self._reply(True, "0")
         cmd = words[0]
         if cmd == "home":
-            if self.flag in ("WR", "FS", "WL"):
-                self.flag = "--"
+            self.flags.discard("WR")
             self.homed = True
             self._go(self.home_steps)
             return self._reply(True, "0")
         if cmd == "stop":
             self._halt()
             return self._reply(True, "0")
-        if cmd == "warnings" and words[1:] == ["clear"]:
-            flags = self.flag
-            if self.flag != "WR":
-                self.flag = "--"
-            return self._reply(True, "01 " + flags if flags != "--" else "00")
+        if cmd == "warnings" and words[1:] in ([], ["clear"]):
+            listed = sorted(self.flags)
+            reply = self._reply(True, " ".join([f"{len(listed):02d}", *listed]))
+            if words[1:] == ["clear"]:
+                self.flags -= set(_EVENTS)
+            return reply
         if cmd == "move" and len(words) == 3 and words[1] == "abs":
             if not self.homed:
                 return self._reply(False, "BADDATA")
-            if self.flag == "FS":
+            if "FS" in self.flags:
                 return self._reply(False, "BADDATA")
             try:
                 target = int(words[2])
@@ -189,7 +213,8 @@ class ZaberEmulator:
                 "maxspeed": self.maxspeed,
                 "limit.min": self.limit_min,
                 "limit.max": self.limit_max,
-                "deviceid": self.device_id,
+                "device.id" if self.firmware >= 7 else "deviceid": self.device_id,
+                "version": "7.29" if self.firmware >= 7 else "6.28",
                 "resolution": self.resolution,
             }.get(words[1])
             if value is None:

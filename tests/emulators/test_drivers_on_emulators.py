@@ -160,6 +160,62 @@ def test_stage_faults(clock: SimClock) -> None:
     stage.safe_state()
 
 
+@pytest.mark.parametrize("firmware", [7, 6])
+def test_stage_connects_on_firmware_7_and_6(clock: SimClock, firmware: int) -> None:
+    """Firmware 7 names the id ``device.id`` and has no ``deviceid``: before, connect sent only
+    ``get deviceid`` and a current X-LSM refused it (reported as "stage not homed")."""
+    emu = ZaberEmulator(clock, firmware=firmware)
+    settings = ZaberSettings(clock=clock, model="X-LSM500A")
+    stage = ZaberStage(SimTransport(emu, "stage", 1.0, clock), settings)
+    identity = stage.connect()
+    assert identity["device_id"] == emu.device_id
+    assert identity["firmware"] == ("7.29" if firmware == 7 else "6.28")
+
+
+def test_a_higher_warning_does_not_hide_the_missing_reference(clock: SimClock) -> None:
+    """A reply shows only the flag of highest priority: a supply-voltage warning (WV) hid WR,
+    and an unhomed stage read as homed (the run then skipped homing and moved)."""
+    stage, emu = make_stage(clock)
+    emu.raise_flag("WV")
+    assert emu.flag == "WV" and "WR" in emu.flags
+    assert not stage.is_homed()
+    with pytest.raises(NotHomedError):
+        stage.move_to(0.1)
+    stage.home()
+    assert stage.is_homed()
+
+
+def test_every_fault_flag_is_a_fault_and_a_rejection_keeps_its_reason(clock: SimClock) -> None:
+    """FD (driver disabled) passed as OK before; a rejection while WR showed was reported as
+    "not homed" whatever its reason."""
+    stage, emu = make_stage(clock)
+    with pytest.raises(ReplyError, match=r"get nothing' rejected \(BADCOMMAND, warning WR"):
+        stage.command("get nothing")
+    stage.home()
+    emu.raise_flag("FD")
+    with pytest.raises(StallError, match=r"driver disabled \(FD\)"):
+        stage.position()
+
+
+def test_a_stall_left_from_before_is_cleared_at_connect_and_the_stage_homed(
+    clock: SimClock,
+) -> None:
+    """FS persists until ``warnings clear`` (homing does not clear it): before, every reply
+    raised, so the next run could not even connect; now connect clears it, logs it, and the
+    stage is homed again before it moves."""
+    stage, emu = make_stage(clock)
+    stage.home()
+    emu.stall()
+    emu.handle(b"/1 1 home")
+    assert "FS" in emu.flags  # the manual: only 'warnings clear' clears it
+    fresh = ZaberStage(stage.transport, stage.settings)
+    fresh.connect()
+    assert "FS" not in emu.flags and not fresh.is_homed()  # homed, but homed again first
+    fresh.home()
+    fresh.move_to(0.1)
+    assert emu.position_m() == pytest.approx(0.1, abs=1e-6)
+
+
 def test_stage_move_timeout_stops_axis(clock: SimClock) -> None:
     stage, emu = make_stage(clock, timeout_margin_s=0.0)
     stage.home()

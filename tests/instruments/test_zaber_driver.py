@@ -38,7 +38,9 @@ def settings(**kw: object) -> ZaberSettings:
 
 
 LIMITS = [  # what connect() reads before the first move
-    ("/1 1 get deviceid", "@01 1 OK IDLE -- 50500"),
+    ("/1 1 warnings", "@01 1 OK IDLE -- 00"),
+    ("/1 1 get device.id", "@01 1 OK IDLE -- 50500"),
+    ("/1 1 get version", "@01 1 OK IDLE -- 7.29"),
     ("/1 1 get resolution", "@01 1 OK IDLE -- 64"),
     ("/1 1 get limit.min", "@01 1 OK IDLE -- 0"),
     ("/1 1 get limit.max", "@01 1 OK IDLE -- 300000"),
@@ -71,7 +73,7 @@ def test_move_out_of_limits_refused_before_moving() -> None:
 
 
 def test_move_refused_when_not_homed() -> None:
-    t = ScriptedTransport([*LIMITS, ("/1 1 get pos", "@01 1 OK IDLE WR 0")])
+    t = ScriptedTransport([*LIMITS, ("/1 1 warnings", "@01 1 OK IDLE WR 01 WR")])
     with pytest.raises(NotHomedError, match="not homed"):
         ZaberStage(t, settings()).move_to(0.05)
     assert t.done
@@ -82,7 +84,7 @@ def test_move_polls_until_idle_then_settles() -> None:
     t = ScriptedTransport(
         [
             *LIMITS,
-            ("/1 1 get pos", "@01 1 OK IDLE -- 0"),
+            ("/1 1 warnings", "@01 1 OK IDLE -- 00"),
             ("/1 1 set maxspeed 40960", "@01 1 OK IDLE -- 0"),
             ("/1 1 get pos", "@01 1 OK IDLE -- 20000"),
             ("/1 1 move abs 50000", "@01 1 OK BUSY -- 0"),
@@ -101,7 +103,7 @@ def test_same_side_approach_from_below() -> None:
     t = ScriptedTransport(
         [
             *LIMITS,
-            ("/1 1 get pos", "@01 1 OK IDLE -- 0"),
+            ("/1 1 warnings", "@01 1 OK IDLE -- 00"),
             ("/1 1 set maxspeed 40960", "@01 1 OK IDLE -- 0"),
             ("/1 1 get pos", "@01 1 OK IDLE -- 100000"),
             ("/1 1 move abs 49000", "@01 1 OK BUSY -- 0"),

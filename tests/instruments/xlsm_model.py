@@ -4,7 +4,9 @@ protocol manual and the X-LSM datasheet for the tests; it shares nothing with th
 
 Manual, in short: a command is ``/<device> <axis> [<message id 0-99>] <command> [<data>]``;
 the reply is ``@<device as 2 digits> <axis> [<id>] <OK|RJ> <IDLE|BUSY> <warning flag> <data>``.
-``--`` is no warning, ``WR`` no reference position (not homed). Positions, limits and speeds are
+``--`` is no warning, ``WR`` no reference position (not homed); ``warnings`` lists the active
+flags as a two-digit count and the flags (``01 WR``). Firmware 7 names the id setting
+``device.id`` (firmware 6: ``deviceid``). Positions, limits and speeds are
 in microsteps; resolution 64 microsteps per step by default. Datasheet: X-LSM microstep
 0.047625 um (at 64), travel 500 mm. A move reports BUSY for one status request, then IDLE.
 """
@@ -70,6 +72,8 @@ class XLSM500A:
         if words == ["home"]:
             self.homed, self.pos, self.busy_polls = True, self.limit_min, 1
             return self._answer(mid, True, "0")
+        if words == ["warnings"]:
+            return self._answer(mid, True, "00" if self.homed else "01 WR")
         if words == ["stop"]:
             self.busy_polls = 0
             return self._answer(mid, True, "0")
@@ -82,7 +86,7 @@ class XLSM500A:
             return self._answer(mid, True, "0")
         if words[0] == "get" and len(words) == 2:
             values = {
-                "deviceid": self.device_id,
+                "device.id": self.device_id,
                 "resolution": self.resolution,
                 "limit.min": self.limit_min,
                 "limit.max": self.limit_max,
