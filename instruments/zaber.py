@@ -409,12 +409,30 @@ class ZaberStage:
         return "WR" not in self.warnings() and not self._must_home
 
     def home(self) -> None:
-        """Home and block until idle (timeout ``home_timeout_s``)."""
+        """Home and block until idle (timeout: :meth:`home_timeout_s`)."""
         _ = self.microstep_m  # identity checked before anything moves
+        timeout = self.home_timeout_s()
         self.command("home")
-        self._wait_idle("home", self.settings.home_timeout_s)
+        self._wait_idle("home", timeout)
         self._must_home = False
         self._ensure_speed()
+
+    def home_timeout_s(self) -> float:
+        """How long homing may take (s): the whole travel at the speed the device homes at,
+        the lesser of ``maxspeed`` and ``limit.approach.maxspeed`` (the protocol manual), x 1.5
+        plus the margin; at least ``home_timeout_s`` (also when the device has no such
+        settings)."""
+        s = self.settings
+        try:
+            rates = [self._get_int("maxspeed"), self._get_int("limit.approach.maxspeed")]
+        except ReplyError:
+            return s.home_timeout_s
+        positive = [r for r in rates if r > 0]
+        if not positive or self._device_limits_m is None:
+            return s.home_timeout_s
+        slowest_m_per_s = min(positive) / SPEED_UNIT * self.microstep_m
+        lo, hi = self._device_limits_m
+        return max(s.home_timeout_s, 1.5 * (hi - lo) / slowest_m_per_s + s.timeout_margin_s)
 
     def _ensure_speed(self) -> None:
         if not self._speed_set:

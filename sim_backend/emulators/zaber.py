@@ -68,6 +68,8 @@ class ZaberEmulator:
         self.limit_min = round(float(travel_m[0]) / microstep_m)
         self.limit_max = round(float(travel_m[1]) / microstep_m)
         self.maxspeed = round(float(speed_m_per_s) / microstep_m * 1.6384)
+        #: the protocol manual: ``home`` runs at the lesser of this and ``maxspeed``
+        self.approach_maxspeed = self.maxspeed
         self.home_steps = (
             self.limit_min
             if home_position_m is None
@@ -127,9 +129,9 @@ class ZaberEmulator:
         self._start = self._target = here
         self._t0 = self._t1 = self.clock.now()
 
-    def _go(self, target: int) -> None:
+    def _go(self, target: int, maxspeed: int | None = None) -> None:
         here = self._steps_now()
-        speed = self.maxspeed / 1.6384  # microsteps/s
+        speed = (self.maxspeed if maxspeed is None else maxspeed) / 1.6384  # microsteps/s
         self._start = round(here)
         self._target = target
         self._t0 = self.clock.now()
@@ -183,7 +185,7 @@ class ZaberEmulator:
         if cmd == "home":
             self.flags.discard("WR")
             self.homed = True
-            self._go(self.home_steps)
+            self._go(self.home_steps, min(self.maxspeed, self.approach_maxspeed))
             return self._reply(True, "0")
         if cmd == "stop":
             self._halt()
@@ -211,6 +213,7 @@ class ZaberEmulator:
             value = {
                 "pos": round(self._steps_now()),
                 "maxspeed": self.maxspeed,
+                "limit.approach.maxspeed": self.approach_maxspeed,
                 "limit.min": self.limit_min,
                 "limit.max": self.limit_max,
                 "device.id" if self.firmware >= 7 else "deviceid": self.device_id,

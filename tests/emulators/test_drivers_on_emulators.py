@@ -216,6 +216,17 @@ def test_a_stall_left_from_before_is_cleared_at_connect_and_the_stage_homed(
     assert emu.position_m() == pytest.approx(0.1, abs=1e-6)
 
 
+def test_homing_at_a_slow_approach_speed_is_waited_for(clock: SimClock) -> None:
+    """The device homes at the lesser of maxspeed and limit.approach.maxspeed: at 1 mm/s from
+    the middle of 300 mm that is 150 s, and the driver gave up after a fixed 120 s (then
+    stopped the axis, and the run could not start)."""
+    stage, emu = make_stage(clock)
+    emu.approach_maxspeed = round(1e-3 / emu.microstep_m * 1.6384)  # 1 mm/s
+    t0 = clock.now()
+    stage.home()
+    assert stage.is_homed() and clock.now() - t0 == pytest.approx(150, abs=1)
+
+
 def test_stage_move_timeout_stops_axis(clock: SimClock) -> None:
     stage, emu = make_stage(clock, timeout_margin_s=0.0)
     stage.home()
