@@ -68,11 +68,28 @@ _DECODER_RE = re.compile(r"^([A-Za-z]{2}-\d+\w*)\s+(.+)$")
 
 
 #: The velocity decoders known on the OFV-5000 (with the OFV-534 head): decoder -> its ranges
-#: (sensitivity, mm/s/V) -> the range's upper frequency (Hz), per the VD-09 specification of the
-#: OFV-5000 user manual. A range not listed here is refused before anything is connected.
-VELOCITY_RANGES: dict[str, dict[float, float]] = {
-    "VD-09": {1: 100e3, 2: 250e3, 5: 500e3, 10: 1.5e6, 20: 1.5e6, 50: 2.5e6, 100: 2.5e6},
+#: (sensitivity, mm/s/V) -> the range's upper frequency (Hz), ``None`` where no source gives it.
+#: The ranges are those a lab's OFV-5000 software offers (the PALab PLACE project's Polytec
+#: plugin: VD-09 5 mm/s/V to 1 m/s/V, from 20 mm/s/V also as an "LP" low-pass variant; VD-08
+#: 0.2 to 50 mm/s/V); before, the VD-09 had the VD-08's 1 and 2 mm/s/V and lacked 200 mm/s/V to
+#: 1 m/s/V. The frequencies up to 100 mm/s/V are the earlier table's, unconfirmed. A range not
+#: listed here is refused before anything is connected; the controller's own ``MaxFreq`` is
+#: what a run records.
+VELOCITY_RANGES: dict[str, dict[float, float | None]] = {
+    "VD-09": {
+        5: 500e3,
+        10: 1.5e6,
+        20: 1.5e6,
+        50: 2.5e6,
+        100: 2.5e6,
+        200: None,
+        500: None,
+        1000: None,
+    },
+    "VD-08": {0.2: None, 0.5: None, 1: None, 2: None, 5: None, 10: None, 20: None, 50: None},
 }
+#: a range with the decoder's low-pass filter on (``"50mm/s/V LP"``): the same sensitivity
+_LOW_PASS = re.compile(r"\s*LP$", re.IGNORECASE)
 
 
 def _range_parts(range_name: str) -> tuple[str, float] | None:
@@ -106,6 +123,8 @@ def velocity_range_error(range_name: str) -> str | None:
     table = VELOCITY_RANGES.get(decoder)
     if table is None:
         return f"decoder {decoder!r} is not one this software knows ({_allowed_text()})"
+    if _LOW_PASS.search(range_name) and (decoder != "VD-09" or mm_s_V < 20):
+        return f"{range_name!r}: low-pass ('LP') ranges are the VD-09's from 20 mm/s/V"
     if not any(math.isclose(mm_s_V, r, rel_tol=1e-9) for r in table):
         shown = ", ".join(f"{r:g}" for r in sorted(table))
         return f"{range_name!r} is not a range of the {decoder}; its ranges: {shown} mm/s/V"
@@ -113,9 +132,10 @@ def velocity_range_error(range_name: str) -> str | None:
 
 
 def range_max_frequency_Hz(range_name: str) -> float | None:
-    """The upper frequency (Hz) of a known decoder range, or ``None``."""
+    """The upper frequency (Hz) of a known decoder range, or ``None`` (unknown, or a low-pass
+    range, whose filter's corner no source gives)."""
     parts = _range_parts(range_name)
-    if parts is None:
+    if parts is None or _LOW_PASS.search(range_name):
         return None
     table = VELOCITY_RANGES.get(parts[0], {})
     return next((f for r, f in table.items() if math.isclose(parts[1], r, rel_tol=1e-9)), None)
@@ -127,7 +147,7 @@ def parse_sensitivity(range_name: str) -> float:
     from instruments.units import UnitError, parse_quantity
 
     m = _DECODER_RE.match(range_name.strip())
-    text = m.group(2) if m else range_name
+    text = _LOW_PASS.sub("", m.group(2) if m else range_name)
     try:
         value = parse_quantity(text.strip(), "velocity_per_volt")
     except UnitError:

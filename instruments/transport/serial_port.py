@@ -7,6 +7,7 @@ from typing import Any
 
 from instruments.errors import InstrumentError, InstrumentTimeout
 from instruments.transport.block import encode_block
+from instruments.transport.reply_text import reply_text
 
 __all__ = ["SerialTransport"]
 
@@ -96,10 +97,7 @@ class SerialTransport:
             raise InstrumentTimeout(
                 f"{self.name}: no reply to {what!r} within {self.timeout_s:g} s"
             )
-        try:
-            return raw.decode("ascii").strip("\r\n")
-        except UnicodeDecodeError:
-            raise InstrumentError(f"{self.name}: non-ASCII reply to {what!r}: {raw!r}") from None
+        return reply_text(raw).strip("\r\n")
 
     def write(self, command: str) -> None:
         self._send(command, command.encode("ascii") + self._term)

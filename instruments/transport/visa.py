@@ -8,6 +8,7 @@ from typing import Any
 
 from instruments.errors import DriverNotInstalledError, InstrumentError, InstrumentTimeout
 from instruments.transport.block import encode_block
+from instruments.transport.reply_text import reread_as_utf8
 
 __all__ = ["VisaTransport"]
 
@@ -89,6 +90,8 @@ class VisaTransport:
         self.timeout_s = float(timeout_s)
         self._res.read_termination = read_termination
         self._res.write_termination = write_termination
+        self._res.encoding = "latin-1"  # every byte a character: a reply with a micro sign
+        # reads (pyvisa's default, ASCII, raised UnicodeDecodeError on it); see reply_text
         if baud_rate is not None:
             self._res.baud_rate = int(baud_rate)
         self._write_term = write_termination.encode()
@@ -158,14 +161,14 @@ class VisaTransport:
                 self._res.flush(self._discard)
             except Exception:
                 pass
-        return str(self._call(command, self._res.query, command)).strip()
+        return reread_as_utf8(str(self._call(command, self._res.query, command))).strip()
 
     def write_block(self, header: str, data: bytes) -> None:
         payload = header.encode() + encode_block(data) + self._write_term
         self._call(header, self._res.write_raw, payload)
 
     def read(self) -> str:
-        return str(self._call("read", self._res.read)).strip()
+        return reread_as_utf8(str(self._call("read", self._res.read))).strip()
 
     def close(self) -> None:
         try:

@@ -25,18 +25,34 @@ import re
 __all__ = ["BAUD_RATE", "VD09_RANGES", "PolytecEmulator"]
 
 BAUD_RATE = 115200
-#: VD-09 ranges: value -> (sensitivity (m/s)/V, max frequency Hz); signal delay 7.3 us
+#: VD-09 ranges as an OFV-5000 lists them (the PLACE project's plugin: 5 mm/s/V to 1 m/s/V, from
+#: 20 mm/s/V also with the low-pass filter, "LP"): value -> (sensitivity (m/s)/V, MaxFreq Hz).
+#: The frequencies are this emulator's assumption (no source gives them per range; 100 kHz for
+#: the low-pass ones); signal delay 7.3 us
 VD09_RANGES: dict[str, tuple[float, float]] = {
-    "1mm/s/V": (1e-3, 100e3),
-    "2mm/s/V": (2e-3, 250e3),
     "5mm/s/V": (5e-3, 500e3),
     "10mm/s/V": (10e-3, 1.5e6),
-    "20mm/s/V": (20e-3, 1.5e6),
-    "50mm/s/V": (50e-3, 2.5e6),
-    "100mm/s/V": (100e-3, 2.5e6),
+    **{
+        f"{v}/V{lp}": (sens, 100e3 if lp else 2.5e6)
+        for v, sens in (
+            ("20mm/s", 20e-3),
+            ("50mm/s", 50e-3),
+            ("100mm/s", 100e-3),
+            ("200mm/s", 200e-3),
+            ("500mm/s", 500e-3),
+            ("1m/s", 1.0),
+        )
+        for lp in ("", " LP")
+    },
 }
 VD09_DELAY_S = 7.3e-6
 NOT_AVAILABLE = "Not Available"
+
+
+def _canonical(value: str) -> str:
+    """A range as this controller spells it: no spaces, but one before ``LP``."""
+    v = re.sub(r"\s", "", value)
+    return v[:-2] + " LP" if v.upper().endswith("LP") else v
 
 
 class PolytecEmulator:
@@ -53,10 +69,10 @@ class PolytecEmulator:
         level_scale: int = 100,
     ) -> None:
         decoder, _, value = range_name.partition(" ")
-        if decoder != "VD-09" or value.replace(" ", "") not in VD09_RANGES:
+        if decoder != "VD-09" or _canonical(value) not in VD09_RANGES:
             raise ValueError(f"emulated VD-09 has no range {range_name!r}")
         self.decoder = decoder
-        self.range_value = value.replace(" ", "")
+        self.range_value = _canonical(value)
         self.decoder_index = decoder_index
         self.echo = echo
         #: line speed (baud) the device listens at; 115200 as shipped
@@ -113,8 +129,8 @@ class PolytecEmulator:
         if device == "Interface" and index == "0" and item == "Echo" and value in ("On", "Off"):
             self.echo = value == "On"
         elif device == "VeloDec" and index == str(self.decoder_index) and item == "Range":
-            if re.sub(r"\s", "", value) in VD09_RANGES:
-                self.range_value = re.sub(r"\s", "", value)
+            if _canonical(value) in VD09_RANGES:
+                self.range_value = _canonical(value)
         elif device == "SensorHead" and index == "0" and item == "AutoFocus" and value == "Search":
             self.autofocus_count += 1
 

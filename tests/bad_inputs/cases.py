@@ -249,7 +249,8 @@ CASES: tuple[Case, ...] = (
     _b("stage_speed_0", "stage speed: 0 mm/s", "speed: 25 mm/s", "speed: 0 mm/s",
        ("bench.yaml", "speed")),
     _b("vibrometer_range", "vibrometer range VD-09 5000mm/s/V", "range: VD-09 50mm/s/V",
-       "range: VD-09 5000mm/s/V", ("bench.yaml", "range", "1, 2, 5, 10, 20, 50, 100 mm/s/V")),
+       "range: VD-09 5000mm/s/V",
+       ("bench.yaml", "range", "5, 10, 20, 50, 100, 200, 500, 1000 mm/s/V")),
     _b("sim_integrator", "simulation dem_integrator: bogus (before: --dry-run passed, the run "
        "wrote a failed file)", "dem_duration: 30 ms",
        "dem_duration: 30 ms\n  dem_integrator: bogus",

@@ -137,3 +137,30 @@ def test_a_level_above_the_full_scale_is_refused_not_clipped() -> None:
         pytest.approx(0.8)
     )
     assert t.done
+
+
+def test_the_velocity_ranges_are_the_decoders_own() -> None:
+    """The VD-09's ranges as an OFV-5000 lists them (5 mm/s/V to 1 m/s/V, and "LP" low-pass
+    variants from 20 mm/s/V); before, the table gave it the VD-08's 1 and 2 mm/s/V and refused
+    200 mm/s/V to 1 m/s/V, and a controller left on "50mm/s/V LP" could not be read."""
+    from instruments.polytec import range_max_frequency_Hz, velocity_range_error
+
+    for good in ("VD-09 5mm/s/V", "VD-09 200mm/s/V", "VD-09 1m/s/V", "VD-09 50mm/s/V LP"):
+        assert velocity_range_error(good) is None, good
+    for bad in ("VD-09 1mm/s/V", "VD-09 2mm/s/V", "VD-09 10mm/s/V LP", "VD-08 5mm/s/V LP"):
+        assert velocity_range_error(bad) is not None, bad
+    assert velocity_range_error("VD-08 0.5mm/s/V") is None
+    assert parse_sensitivity("VD-09 50mm/s/V LP") == pytest.approx(0.05)
+    assert parse_sensitivity("1m/s/V LP") == pytest.approx(1.0)
+    assert range_max_frequency_Hz("VD-09 50mm/s/V LP") is None  # the filter's corner: unknown
+    t = ScriptedTransport(
+        [
+            ("Get,VeloDec,1,Name", "VD-09"),
+            ("Set,VeloDec,1,Range,50mm/s/V LP", None),
+            ("Get,VeloDec,1,Range", "50mm/s/V LP"),
+            ("Get,VeloDec,1,Range", "50mm/s/V LP"),
+        ]
+    )
+    v = PolytecVibrometer(t)
+    v.set_velocity_range("VD-09 50mm/s/V LP")
+    assert v.sensitivity_m_per_s_per_V() == pytest.approx(0.05)

@@ -24,7 +24,12 @@ pytestmark = pytest.mark.skipif(
     sys.platform == "win32" or not hasattr(os, "openpty"), reason="needs a pseudo terminal"
 )
 
-REPLIES = {b"Get,VeloDec,1,Name": b"VD-09\n", b"Get,VeloDec,1,Range": b"50mm/s/V\n"}
+REPLIES = {
+    b"Get,VeloDec,1,Name": b"VD-09\n",
+    b"Get,VeloDec,1,Range": b"50mm/s/V\n",
+    b"Get,VeloDec,1,SignalDelay": b"7.3 \xb5s\n",  # the micro sign as one Latin-1 byte
+    b"Get,VeloDec,1,MaxFreq": "2.5 MHz \u00b5\n".encode(),  # and as UTF-8 (a made-up reply)
+}
 LATE_S = 0.8  # the signal level's reply comes after the driver's 0.5 s timeout
 
 
@@ -64,6 +69,33 @@ def test_a_late_reply_on_a_visa_serial_line_does_not_answer_the_next_query() -> 
         time.sleep(LATE_S)  # the late "512" now waits on the line
         assert vib.velocity_range() == "VD-09 50mm/s/V"
         assert vib.velocity_range() == "VD-09 50mm/s/V"
+    finally:
+        stop.set()
+        thread.join(2)
+        transport.close()
+        os.close(far)
+        os.close(near)
+
+
+@pytest.mark.parametrize("kind", ["visa", "pyserial"])
+def test_a_micro_sign_in_a_reply_reads_on_both_transports(kind: str) -> None:
+    """PLACE's OFV-5000 driver met a micro sign in a reply in the lab; both transports decoded
+    replies as strict ASCII, so the vibrometer's snapshot (its signal delay) failed."""
+    pytest.importorskip("pyvisa_py")
+    import tty
+
+    far, near = os.openpty()
+    tty.setraw(near)
+    stop = threading.Event()
+    thread = threading.Thread(target=_controller, args=(far, stop), daemon=True)
+    thread.start()
+    port = os.ttyname(near)
+    resource = f"ASRL{port}::INSTR" if kind == "visa" else port
+    transport = open_transport(resource, name="vibrometer", timeout_s=0.5, baud_rate=115200)
+    try:
+        vib = PolytecVibrometer(transport)
+        assert vib.signal_delay_s() == pytest.approx(7.3e-6)
+        assert transport.query("Get,VeloDec,1,MaxFreq") == "2.5 MHz \u00b5"
     finally:
         stop.set()
         thread.join(2)
