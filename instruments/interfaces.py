@@ -11,6 +11,7 @@ is refused before a byte is sent to an instrument.
 from __future__ import annotations
 
 import math
+import threading
 from dataclasses import dataclass, field
 from typing import Any, Literal, Protocol, runtime_checkable
 
@@ -185,7 +186,10 @@ class Vibrometer(Instrument, Protocol):
 class Stage(Instrument, Protocol):
     """A motorised linear stage carrying the vibrometer head. Positions in metres."""
 
-    def home(self) -> None: ...
+    def home(self, cancel: threading.Event | None = None) -> None:
+        """Home and block until done; when ``cancel`` is set meanwhile, stop the axis and return
+        early (not homed)."""
+        ...
 
     def is_homed(self) -> bool: ...
 

@@ -165,7 +165,6 @@ class KeysightGenerator:
         self.limits = limits
         self.channels = tuple(channels)
         self._configs: dict[int, BurstConfig] = {}
-        self._outputs: dict[int, bool] = {ch: False for ch in self.channels}
         self._readback: dict[int, ChannelReadback] = {}
         self._idn: str | None = None
 
@@ -312,7 +311,6 @@ class KeysightGenerator:
             raise
         self._readback[channel] = held
         self._configs[channel] = config
-        self._outputs[channel] = False
 
     def held(self, channel: int) -> ChannelReadback | None:
         """What ``channel`` reported holding after its last configuration (None before)."""
@@ -378,7 +376,6 @@ class KeysightGenerator:
         except InstrumentError:
             self.safe_state()
             raise
-        self._outputs[channel] = on
         if on:  # the trigger out follows the channel being played
             self.transport.write(f"OUTP:TRIG:SOUR CH{channel}")
 
@@ -414,14 +411,21 @@ class KeysightGenerator:
 
     # --- provenance and safety --------------------------------------------------------------
     def snapshot(self) -> dict[str, Any]:
-        """Identity, limits and per channel: the burst shape asked for, and every setting as
-        the channel reported it after configuration (``read_back``, SI units: Vpp, V, Sa/s,
-        ohm or ``"INF"``). JSON-serialisable."""
+        """Identity, limits and per channel: the output's state as the instrument reports it
+        now (``OUTPn?``; ``None`` with ``output_error`` when it does not answer: before, the
+        state last asked for, "off" even after an off that was never confirmed), the burst
+        shape asked for, and every setting as the channel reported it after configuration
+        (``read_back``, SI units: Vpp, V, Sa/s, ohm or ``"INF"``). JSON-serialisable."""
         chans: dict[str, Any] = {}
         for ch in self.channels:
             cfg = self._configs.get(ch)
             held = self._readback.get(ch)
-            entry: dict[str, Any] = {"output_on": self._outputs.get(ch, False)}
+            entry: dict[str, Any] = {}
+            try:
+                entry["output_on"] = self.output_state(ch)
+            except InstrumentError as exc:
+                entry["output_on"] = None
+                entry["output_error"] = str(exc).splitlines()[0] if str(exc) else repr(exc)
             if cfg is not None and held is not None:
                 entry.update(
                     f_center_Hz=cfg.shape.f_center_Hz,
@@ -449,7 +453,6 @@ class KeysightGenerator:
                 self.transport.write(f"OUTP{ch} OFF")
             except Exception as exc:
                 log.warning("%s: could not switch output %d off: %s", self.transport.name, ch, exc)
-            self._outputs[ch] = False
 
     def close(self) -> None:
         self.safe_state()

@@ -26,6 +26,7 @@ from __future__ import annotations
 import logging
 import math
 import re
+import threading
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -408,12 +409,14 @@ class ZaberStage:
         at connect since the last :meth:`home`."""
         return "WR" not in self.warnings() and not self._must_home
 
-    def home(self) -> None:
-        """Home and block until idle (timeout: :meth:`home_timeout_s`)."""
+    def home(self, cancel: threading.Event | None = None) -> None:
+        """Home and block until idle (timeout: :meth:`home_timeout_s`); ``cancel`` set meanwhile
+        stops the axis and returns at once, not homed (homing may take minutes)."""
         _ = self.microstep_m  # identity checked before anything moves
         timeout = self.home_timeout_s()
         self.command("home")
-        self._wait_idle("home", timeout)
+        if not self._wait_idle("home", timeout, cancel):
+            return
         self._must_home = False
         self._ensure_speed()
 
@@ -507,13 +510,19 @@ class ZaberStage:
         self.command(f"move abs {self._steps(target_m)}")
         self._wait_idle(f"move abs {target_m * 1e3:.4f} mm", timeout)
 
-    def _wait_idle(self, what: str, timeout_s: float) -> None:
+    def _wait_idle(
+        self, what: str, timeout_s: float, cancel: threading.Event | None = None
+    ) -> bool:
+        """Poll until idle (True); False when ``cancel`` was set (the axis stopped)."""
         clock = self.settings.clock
         t_end = clock.now() + timeout_s
         while True:
+            if cancel is not None and cancel.is_set():
+                self.stop()
+                return False
             r = self.command("get pos")
             if not r.busy:
-                return
+                return True
             if clock.now() > t_end:
                 self.stop()
                 raise InstrumentTimeout(

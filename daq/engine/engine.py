@@ -555,7 +555,10 @@ class RunEngine:
             inst.generator.output(ch, False)
         if not inst.stage.is_homed():
             self._log("info", "homing the stage")
-            inst.stage.home()
+            self._emit(EventKind.STATUS, "homing the stage", text="homing the stage")
+            inst.stage.home(cancel=self._abort)  # an abort stops the axis, not waits for it
+            if self._abort.is_set():
+                raise _Aborted()
 
     def _run_points(self, t0: float) -> tuple[int, int, str, str]:
         proto = self.protocol_file.protocol

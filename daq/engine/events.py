@@ -51,6 +51,8 @@ class EventKind(StrEnum):
     POINT_FAILED = "point_failed"
     PROGRESS = "progress"
     WARNING = "warning"
+    #: what the bench is doing between points (``text``: "homing the stage")
+    STATUS = "status"
     FINISHED = "finished"
 
 
@@ -72,6 +74,7 @@ class RunEvent:
       by the measured point times), ``direction``, ``amplitude``,
       ``cylinder``
     * ``warning``: ``message``
+    * ``status``: ``text`` (what the bench does between points, e.g. homing the stage)
     * ``finished``: ``status``, ``reason``, ``path``, ``n_done``, ``n_failed``, ``n_points``,
       ``n_measured_now``, ``n_already``, ``unconfirmed`` (list of outputs to switch off by
       hand), ``safe_state_s``, ``points_failed_only`` (as :class:`daq.engine.RunResult`)

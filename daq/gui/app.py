@@ -132,7 +132,7 @@ def run_window(args: argparse.Namespace) -> int:
     win.show()
     hold = hold_console_close(win.console_closed)  # Windows: a closed console aborts the run
     unwatch = watch_display(win.display_lost)  # the display gone (ssh -X): aborts the run
-    code = int(app.exec())
+    code = int(app.exec()) or int(getattr(win, "exit_status", 0))  # a run aborted by the close
     unwatch()
     if hold is not None:
         hold.remove()

@@ -105,6 +105,9 @@ class MainWindow(QMainWindow):
         self.adapter: EngineEventAdapter | None = None
         self.live = LiveData()
         self.last_result: Any = None
+        #: the process's exit status: a run aborted by closing the window gives its own (1, or 3
+        #: unsafe), as run_protocol would; 0 otherwise
+        self.exit_status = 0
         self.run_path: Path | None = None
         self._dirty = False
         self._busy_connect = False
@@ -297,6 +300,7 @@ class MainWindow(QMainWindow):
         self._disconnect()
         self._busy_connect = True
         self.bench_panel.set_connected(False, busy=True)
+        self.bench_panel.status_label.setStyleSheet("")
         self.bench_panel.status_label.setText(f"{bf.bench.name}: connecting…")
         assembler = self._assembler
 
@@ -340,8 +344,17 @@ class MainWindow(QMainWindow):
         inst = self.instruments
 
         def done(snap: Any, err: BaseException | None) -> None:
-            if err is None and inst is self.instruments:
+            if inst is not self.instruments:
+                return
+            if err is None:
                 self.bench_panel.show_snapshot(snap)
+                return
+            # before, a failed read left the last state shown, and said nothing
+            line = f"instrument state not read: {str(err).splitlines()[0] if str(err) else err!r}"
+            self.bench_panel.tree.clear()
+            self.bench_panel.status_label.setStyleSheet("QLabel { color: #b00000; }")
+            self.bench_panel.status_label.setText(f"✗ {line}")
+            self.log(line, "error")
 
         BackgroundCall(inst.snapshot, done, name="biafc-gui-snapshot")
 
@@ -625,6 +638,9 @@ class MainWindow(QMainWindow):
                 )
             elif k == EventKind.WARNING:
                 self.log(ev.message, str(d.get("level", "warning")))
+            elif k == EventKind.STATUS:
+                self.run_panel.where_label.setText(str(d["text"]))
+                self.log(str(d["text"]))
             elif k == EventKind.FINISHED:
                 self._finished(d)
 
@@ -652,6 +668,13 @@ class MainWindow(QMainWindow):
         self.run_panel.where_label.setStyleSheet(f"QLabel {{ {style} }}" if style else "")
         if status == "unsafe":
             self.statusBar().showMessage(line)
+            self.bench_panel.status_label.setStyleSheet(
+                "QLabel { color: #b00000; font-weight: bold; }"
+            )
+            self.bench_panel.status_label.setText(
+                "✗ UNSAFE: the generator's outputs were not confirmed off; switch them off by "
+                "hand (the run's last line says which)"
+            )
         self._redraw()
         self.refresh_snapshot()
         from daq.logsetup import detach
@@ -773,6 +796,10 @@ class MainWindow(QMainWindow):
             QApplication.processEvents()
             if self.adapter is not None:
                 self._on_events()
+            if self.engine.result is not None:  # the window's exit status is the run's
+                from daq.engine.outcome import exit_code
+
+                self.exit_status = int(exit_code(self.engine.result))
         self._redraw_timer.stop()
         if self.instruments is not None:
             try:

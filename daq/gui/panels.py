@@ -19,6 +19,7 @@ from PySide6.QtWidgets import (
     QPlainTextEdit,
     QProgressBar,
     QPushButton,
+    QSizePolicy,
     QTreeWidget,
     QTreeWidgetItem,
     QVBoxLayout,
@@ -225,6 +226,11 @@ class RunPanel(QGroupBox):
         bold = QFont(self.where_label.font())
         bold.setBold(True)
         self.where_label.setFont(bold)
+        # a long final line (an unsafe end names every output to switch off) wraps: before, it
+        # widened the window past the screen and hid the line's end and the buttons
+        self.where_label.setWordWrap(True)
+        self.where_label.setSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Preferred)
+        self.where_label.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
         lay.addWidget(self.where_label)
         self.start_button.clicked.connect(self.start_requested)
         self.pause_button.clicked.connect(self.pause_requested)

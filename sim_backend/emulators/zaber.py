@@ -76,7 +76,7 @@ class ZaberEmulator:
             else round(float(home_position_m) / microstep_m)
         )
         self.responsive = True
-        self.homed = False
+        self._homing = False  # a home move under way: WR clears when it ends
         #: 7: the id is ``device.id``; 6: ``deviceid``
         self.firmware = int(firmware)
         #: every active warning flag
@@ -105,8 +105,21 @@ class ZaberEmulator:
 
     # --- faults ---------------------------------------------------------------------------
     @property
+    def homed(self) -> bool:
+        """Whether the device has its reference position (no ``WR``)."""
+        self._homing_done()
+        return "WR" not in self.flags
+
+    def _homing_done(self) -> None:
+        """The manual's example: ``WR`` shows while the home move runs, and clears at its end."""
+        if self._homing and not self.busy():
+            self._homing = False
+            self.flags.discard("WR")
+
+    @property
     def flag(self) -> str:
         """The flag a reply shows: the active one of highest priority, ``--`` when none."""
+        self._homing_done()
         ranked = sorted(self.flags, key=lambda f: _PRIORITY.index(f) if f in _PRIORITY else 0)
         return ranked[0] if ranked else "--"
 
@@ -121,10 +134,11 @@ class ZaberEmulator:
 
     def lose_homing(self) -> None:
         """Forget the reference position (flag WR)."""
-        self.homed = False
+        self._homing = False
         self.flags.add("WR")
 
     def _halt(self) -> None:
+        self._homing = False  # a home move stopped short: still no reference
         here = round(self._steps_now())
         self._start = self._target = here
         self._t0 = self._t1 = self.clock.now()
@@ -183,14 +197,14 @@ class ZaberEmulator:
             return self._reply(True, "0")
         cmd = words[0]
         if cmd == "home":
-            self.flags.discard("WR")
-            self.homed = True
             self._go(self.home_steps, min(self.maxspeed, self.approach_maxspeed))
+            self._homing = True
             return self._reply(True, "0")
         if cmd == "stop":
             self._halt()
             return self._reply(True, "0")
         if cmd == "warnings" and words[1:] in ([], ["clear"]):
+            self._homing_done()
             listed = sorted(self.flags)
             reply = self._reply(True, " ".join([f"{len(listed):02d}", *listed]))
             if words[1:] == ["clear"]:

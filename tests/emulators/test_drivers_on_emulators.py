@@ -227,6 +227,32 @@ def test_homing_at_a_slow_approach_speed_is_waited_for(clock: SimClock) -> None:
     assert stage.is_homed() and clock.now() - t0 == pytest.approx(150, abs=1)
 
 
+def test_homing_shows_wr_until_it_ends_and_a_cancel_stops_it(clock: SimClock) -> None:
+    """The manual's example: WR shows while the home move runs (the emulator cleared it as the
+    command arrived). ``home(cancel)`` stops the axis at the next poll and returns, not homed."""
+    import threading
+
+    stage, emu = make_stage(clock)
+    emu.approach_maxspeed = round(1e-3 / emu.microstep_m * 1.6384)  # 1 mm/s: 150 s to home
+
+    class AfterPolls(threading.Event):
+        def __init__(self, n: int) -> None:
+            super().__init__()
+            self.n = n
+
+        def is_set(self) -> bool:
+            self.n -= 1
+            return self.n < 0
+
+    stage.home(cancel=AfterPolls(3))
+    assert not emu.busy() and not emu.homed and "WR" in emu.flags
+    assert not stage.is_homed() and clock.now() < 10  # stopped within a few polls
+    emu.handle(b"/1 1 home")
+    assert emu.busy() and emu.flag == "WR"
+    stage.home()
+    assert emu.homed and stage.is_homed()
+
+
 def test_stage_move_timeout_stops_axis(clock: SimClock) -> None:
     stage, emu = make_stage(clock, timeout_margin_s=0.0)
     stage.home()

@@ -7,6 +7,7 @@ noise seeded by (seed, point, repeat count), so a resumed run reproduces an unin
 from __future__ import annotations
 
 import hashlib
+import threading
 import time
 from dataclasses import dataclass, field
 from typing import Any
@@ -30,6 +31,7 @@ class Faults:
     read_sleep_s: float = 0.0  # wall time per read (to abort / kill mid-scan)
     clip: bool = False
     generator_dead_after_reads: int | None = None  # the generator stops answering after N reads
+    home_s: float = 0.0  # wall time homing takes (a cancel ends it, not homed)
 
 
 @dataclass
@@ -150,7 +152,9 @@ class FakeStage:
     def __init__(self, w: FakeWorld) -> None:
         self.w = w
 
-    def home(self) -> None:
+    def home(self, cancel: threading.Event | None = None) -> None:
+        if self.w.faults.home_s > 0 and (cancel or threading.Event()).wait(self.w.faults.home_s):
+            return  # cancelled: stopped short of home
         self.w.homed = True
         self.w.position_m = 0.0
 

@@ -125,6 +125,30 @@ def test_abort_from_another_thread(protocol, bench, out: Path) -> None:
     assert any("aborted" in m for _, _, m in run.log)
 
 
+def test_an_abort_while_the_stage_homes_stops_it_at_once(protocol, bench, out: Path) -> None:
+    """Homing may take minutes on the rig; the run said nothing of it (the window showed "idle")
+    and an abort waited for it to end. Now a status event names it, and an abort stops it."""
+    import time
+
+    w = FakeWorld(faults=Faults(home_s=30.0))
+    eng = RunEngine(protocol, bench, fake_bench(w), out)
+    homing = threading.Event()
+    eng.subscribe(
+        lambda e: (
+            homing.set()
+            if e.kind == EventKind.STATUS and e.data["text"] == "homing the stage"
+            else None
+        )
+    )
+    eng.start()
+    assert homing.wait(10)
+    t0 = time.monotonic()
+    eng.abort("stop requested")
+    res = eng.wait(10)
+    assert res is not None and res.status == "aborted" and time.monotonic() - t0 < 5
+    assert not w.homed and w.moves == 0
+
+
 def test_pause_and_resume_at_point_boundaries(protocol, bench, out: Path) -> None:
     w = FakeWorld(faults=Faults(read_sleep_s=0.005))
     eng = RunEngine(protocol, bench, fake_bench(w), out)

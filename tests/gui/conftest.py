@@ -141,6 +141,8 @@ class StubWindow:
     """What ``daq.gui.app.run_window`` asks of the window, doing nothing (tests of the app's
     own steps)."""
 
+    exit_status = 0
+
     def __init__(self, *args: Any) -> None:
         pass
 

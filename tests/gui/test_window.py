@@ -180,6 +180,7 @@ def test_close_during_run_aborts_safely(qtbot: Any, tmp_path: Path) -> None:
     assert len(asked) == 2
     assert time.monotonic() - t0 < 30
     assert read_run(tmp_path / "c.h5").status == "aborted"
+    assert win.exit_status == 1  # as run_protocol's for an aborted run (before: the window's 0)
 
 
 def test_browse_finished_run_file(qtbot: Any, window: MainWindow, tmp_path: Path) -> None:
@@ -229,6 +230,7 @@ def test_an_unsafe_end_is_shown_in_red_naming_the_output(qtbot: Any, tmp_path: P
     win.confirm_close = lambda: True  # type: ignore[method-assign]
     qtbot.addWidget(win)
     win.show()
+    width = win.width()
     win.run_panel.out_edit.setText(str(tmp_path / "u.h5"))
     connect(qtbot, win)
     with qtbot.waitSignal(win.run_finished, timeout=60_000) as blocker:
@@ -239,6 +241,25 @@ def test_an_unsafe_end_is_shown_in_red_naming_the_output(qtbot: Any, tmp_path: P
     assert "b00000" in win.run_panel.where_label.styleSheet()
     assert "SWITCH OFF BY HAND" in win.statusBar().currentMessage()
     assert read_run(tmp_path / "u.h5").status == "unsafe"
+    # the long line wraps: before, it widened the window (1500 to 3421 px) past the screen, and
+    # its end and the Abort button went off it
+    qtbot.wait(50)
+    assert win.width() == width and win.minimumSizeHint().width() < width
+    # the bench panel no longer says "connected" beside outputs listed off (the state last
+    # asked for): it says UNSAFE, and the outputs' state as read, unknown
+    assert "UNSAFE" in win.bench_panel.status_label.text()
+
+    def output_rows() -> list[tuple[str, str]]:
+        tree = win.bench_panel.tree
+        rows = []
+        for i in range(tree.topLevelItemCount()):
+            top = tree.topLevelItem(i)
+            rows += [(top.child(j).text(0), top.child(j).text(1)) for j in range(top.childCount())]
+        return [r for r in rows if r[0].endswith("output_on")]
+
+    wait_until(qtbot, lambda: ("channels.1.output_on", "None") in output_rows())
+    assert ("channels.1.output_on", "False") not in output_rows()
+    assert win.run_panel.abort_button.geometry().right() <= win.run_panel.width()
 
 
 def test_a_resume_of_a_file_another_process_writes_is_refused(

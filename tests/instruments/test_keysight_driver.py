@@ -108,15 +108,26 @@ def test_output_trigger_and_opc() -> None:
     samples = burst_samples(CFG.shape, CFG.sample_rate_Hz)
     script = [*config_script(1, 2 * samples.size), *readback_script(1, 2 * samples.size), NO_ERR]
     script += [("OUTP1 ON", None), NO_ERR, ("OUTP:TRIG:SOUR CH1", None)]
-    script += [("*TRG", None), ("*OPC?", "1")]
+    script += [("*TRG", None), ("*OPC?", "1"), ("OUTP1?", "1"), ("OUTP2?", "0")]
     t = ScriptedTransport(script)
     gen = KeysightGenerator(t, LIMITS)
     gen.configure_burst(1, CFG)
     gen.output(1, True)
     gen.trigger()
     gen.wait_complete()
+    snap = gen.snapshot()["channels"]
     assert t.done
-    assert gen.snapshot()["channels"]["1"]["output_on"] is True
+    assert snap["1"]["output_on"] is True and snap["2"]["output_on"] is False
+
+
+def test_the_snapshot_reads_the_outputs_and_never_claims_off_unread() -> None:
+    """Before, the snapshot gave the state last asked for: after an unsafe end (the off never
+    confirmed) the bench window listed both outputs "False". Now it asks ``OUTPn?``; a generator
+    that does not answer gives ``None`` and the reason."""
+    gen = KeysightGenerator(ScriptedTransport([("OUTP1?", "0"), ("OUTP2?", None)]), LIMITS)
+    chans = gen.snapshot()["channels"]
+    assert chans["1"] == {"output_on": False}
+    assert chans["2"]["output_on"] is None and "OUTP2?" in chans["2"]["output_error"]
 
 
 def test_output_on_refused_before_configuration() -> None:
@@ -212,11 +223,19 @@ def test_snapshot_records_what_the_channel_reports_not_the_request() -> None:
     samples = burst_samples(CFG.shape, CFG.sample_rate_Hz)
     n_bytes = 2 * samples.size
     held = {"VOLT?": "+4.002000000000000E+00", "VOLT:OFFS?": "+5.000000000000000E-05"}
-    t = ScriptedTransport([*config_script(1, n_bytes), *readback_script(1, n_bytes, held), NO_ERR])
+    t = ScriptedTransport(
+        [
+            *config_script(1, n_bytes),
+            *readback_script(1, n_bytes, held),
+            NO_ERR,
+            ("OUTP1?", "0"),
+            ("OUTP2?", "0"),
+        ]
+    )
     gen = KeysightGenerator(t, LIMITS)
     gen.configure_burst(1, CFG)  # within 0.1 % + 0.1 mV: accepted
-    assert t.done
     rb = gen.snapshot()["channels"]["1"]["read_back"]
+    assert t.done
     assert rb["amplitude_Vpp"] == 4.002 and rb["offset_V"] == 5e-5  # not the 4 Vpp, 0 V asked
     assert rb["sample_rate_Hz"] == pytest.approx(played_rate(samples.size), rel=1e-15)
     assert rb["load_ohm"] == "INF" and rb["amplitude_unit"] == "VPP"
@@ -243,7 +262,7 @@ def test_a_coerced_setting_is_one_line_naming_setting_request_and_read_back(
     samples = burst_samples(CFG.shape, CFG.sample_rate_Hz)
     n_bytes = 2 * samples.size
     script = [*config_script(1, n_bytes), *readback_script(1, n_bytes, {query: reply}), NO_ERR]
-    script += [("OUTP1 OFF", None), ("OUTP2 OFF", None)]
+    script += [("OUTP1 OFF", None), ("OUTP2 OFF", None), ("OUTP1?", "0"), ("OUTP2?", "0")]
     t = ScriptedTransport(script, name="generator (TCPIP::x::INSTR)")
     gen = KeysightGenerator(t, LIMITS)
     with pytest.raises(ReplyError) as info:
@@ -251,8 +270,8 @@ def test_a_coerced_setting_is_one_line_naming_setting_request_and_read_back(
     text = str(info.value)
     assert text.startswith("generator (TCPIP::x::INSTR): channel 1 ") and "\n" not in text
     assert message in text and "tolerance" in text
-    assert t.done  # outputs switched off
     assert gen.held(1) is None and "read_back" not in gen.snapshot()["channels"]["1"]
+    assert t.done  # outputs switched off
     with pytest.raises(Exception, match="configure a burst"):
         gen.output(1, True)
 
