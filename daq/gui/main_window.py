@@ -131,6 +131,16 @@ class MainWindow(QMainWindow):
             self.load_protocol(protocol_path)
 
     # -- layout ----------------------------------------------------------------------------
+    def _lock_for_run(self, active: bool) -> None:
+        """During a run the bench and the protocol are the run's: before, Reconnect stayed
+        enabled and did nothing, and the editor took edits that the panel then showed as if
+        they had run."""
+        bp, pp = self.bench_panel, self.protocol_panel
+        for button in (bp.open_button, bp.connect_button, pp.open_button):
+            button.setEnabled(not active)
+        bp.refresh_button.setEnabled(not active and self.instruments is not None)
+        pp.editor.setReadOnly(active)
+
     def _build(self) -> None:
         self.bench_panel = BenchPanel()
         self.protocol_panel = ProtocolPanel()
@@ -172,6 +182,7 @@ class MainWindow(QMainWindow):
         pp.save_requested.connect(self.save_protocol)
         pp.dry_run_requested.connect(self.dry_run)
         pp.text_edited.connect(self._validate_text)
+        rp.active_changed.connect(self._lock_for_run)
         rp.start_requested.connect(self.start_run)
         rp.pause_requested.connect(self.pause)
         rp.resume_requested.connect(self.resume)
@@ -507,9 +518,13 @@ class MainWindow(QMainWindow):
         if path:
             self.start_run(Path(path))
 
-    def start_run(self, resume_path: Path | None = None) -> bool:
+    def start_run(
+        self, resume_path: Path | None = None, prefill: LiveData | bool | None = None
+    ) -> bool:
         """Start the protocol (or continue ``resume_path``); connects the bench first if
-        needed. Returns False when it cannot start (the reason is logged)."""
+        needed. Returns False when it cannot start (the reason is logged). A resumed run's
+        views start from the points already in its file (``prefill``: read on a worker thread
+        first; ``False``: the read failed, the views start empty)."""
         from daq.engine import RunEngine
         from daq.request import RequestError, validate_request
 
@@ -540,6 +555,23 @@ class MainWindow(QMainWindow):
             self.run_panel.set_state("starting")
             self.connect_bench()
             return True
+        if resume and prefill is None:  # the points already in the file, off the GUI thread
+            from protocols.runfile import read_run
+
+            assert resume_path is not None
+            path = resume_path
+
+            def read() -> LiveData:
+                return LiveData.from_run(read_run(path))
+
+            def then(live: Any, err: BaseException | None) -> None:
+                if err is not None:
+                    self.log(f"{shown_path(path)}: its points are not shown ({err})", "warning")
+                self.start_run(path, prefill=live if err is None else False)
+
+            self.run_panel.set_state("starting")
+            BackgroundCall(read, then, name="biafc-gui-prefill")
+            return True
         bf, out, seed = self.bench_file, req.out, req.seed
         try:
             engine = RunEngine(
@@ -549,7 +581,10 @@ class MainWindow(QMainWindow):
             self.log(f"cannot start: {exc}", "error")
             self.run_panel.set_state("idle")
             return False
-        self.live = LiveData.for_plan(engine.plan, self.protocol_file.protocol, self.chain)
+        if isinstance(prefill, LiveData):  # before, a resumed run's maps began empty
+            self.live = prefill
+        else:
+            self.live = LiveData.for_plan(engine.plan, self.protocol_file.protocol, self.chain)
         self.views.show_chain(self.chain, self._f_in())
         self._set_model_for_bench(bf)
         adapter = EngineEventAdapter(self)
@@ -558,7 +593,7 @@ class MainWindow(QMainWindow):
         self.engine, self.adapter, self.run_path = engine, adapter, out
         self.last_result = None
         self.run_panel.progress.setMaximum(engine.plan.n_points)
-        self.run_panel.progress.setValue(0)
+        self.run_panel.progress.setValue(self.live.n_points)  # a resumed run's points: done
         self.run_panel.set_state("running")
         from daq.logsetup import attach_run_log, detach
 

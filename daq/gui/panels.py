@@ -194,6 +194,8 @@ class RunPanel(QGroupBox):
     resume_requested = Signal()
     abort_requested = Signal()
     resume_file_requested = Signal()
+    #: True while a run starts, runs or is paused: the bench and protocol wait until it ends
+    active_changed = Signal(bool)
 
     def __init__(self, parent: QWidget | None = None) -> None:
         super().__init__("Run", parent)
@@ -248,6 +250,7 @@ class RunPanel(QGroupBox):
         self.resume_button.setEnabled(state == "paused")
         self.abort_button.setEnabled(active)
         self.out_edit.setEnabled(not active)
+        self.active_changed.emit(active)
 
     def show_progress(self, d: dict[str, Any]) -> None:
         self.progress.setMaximum(int(d["total"]))

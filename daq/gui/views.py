@@ -263,6 +263,8 @@ class SweepView(pg.PlotWidget):
         super().__init__(parent)
         self.setLabel("bottom", "cylinder")
         self.setLabel("left", "amplitude index")
+        for side in ("left", "bottom"):  # one amplitude read "amplitude (x0.001)"
+            self.getAxis(side).enableAutoSIPrefix(False)
         self.image = pg.ImageItem(axisOrder="row-major")
         self.image.setColorMap(_CMAP)
         self.addItem(self.image)
@@ -389,7 +391,15 @@ class LiveViews(QTabWidget):
         """Draw everything from ``data`` (called at most a few times a second)."""
         tr = data.last
         f_in = None
-        if tr is not None:
+        if tr is None:  # nothing measured (an empty run file): before, the last file's stayed
+            self.trace.c_vel.setData([], [])
+            self.trace.c_drv.setData([], [])
+            self.trace.p_vel.setTitle("no point measured")
+            self.spectrum.curve.setData([], [])
+            self.spatial.image.clear()
+            self.spatial.setTitle("spatial-frequency map: no point measured")
+            self.sweep.image.clear()
+        else:
             self.trace.show_trace(tr)
             scan = data.scans.get(tr.direction)
             f_in = scan.f_center_Hz if scan is not None else None

@@ -38,7 +38,7 @@ PACKAGES = (
     "pyvisa-py",
     "pyserial",
     "nidaqmx",
-    "PySide6",
+    "PySide6-Essentials",  # the distribution the project installs (import name PySide6)
     "pint",
 )
 

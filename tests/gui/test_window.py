@@ -92,6 +92,9 @@ def test_pause_resume_abort_buttons(qtbot: Any, tmp_path: Path) -> None:
     rp.start_button.click()
     wait_until(qtbot, lambda: win.live.n_points >= 1)
     assert rp.pause_button.isEnabled() and not rp.start_button.isEnabled()
+    # the run's bench and protocol: Reconnect did nothing and the editor took edits, before
+    assert not win.bench_panel.connect_button.isEnabled()
+    assert win.protocol_panel.editor.isReadOnly()
     rp.pause_button.click()
     wait_until(qtbot, lambda: rp.resume_button.isEnabled())
     assert win.engine.state.value == "paused"
@@ -109,13 +112,22 @@ def test_pause_resume_abort_buttons(qtbot: Any, tmp_path: Path) -> None:
     assert run.status == "aborted"
     assert 0 < _done_count(tmp_path / "a.h5") < 6
     assert rp.start_button.isEnabled() and not rp.abort_button.isEnabled()
+    assert win.bench_panel.connect_button.isEnabled()
+    assert not win.protocol_panel.editor.isReadOnly()
     if hasattr(win.instruments.world, "outputs"):  # fake bench: generator outputs off
         assert not any(win.instruments.world.outputs.values())
-    # resume the interrupted file from the window: it completes
+    # resume the interrupted file from the window: it completes, and its views hold every
+    # point (before, the maps left out those already in the file, and progress began at 0)
+    n_before = _done_count(tmp_path / "a.h5")
     with qtbot.waitSignal(win.run_finished, timeout=60_000) as blocker:
         assert win.start_run(tmp_path / "a.h5")
+        wait_until(qtbot, lambda: win.running)
+        assert rp.progress.value() >= n_before
     assert blocker.args == ["complete"]
     assert _done_count(tmp_path / "a.h5") == 6
+    assert win.live.n_points == 6
+    win._redraw()
+    assert win.views.sweep.n_cells == 6
 
 
 def test_validation_error_shown_in_protocol_panel(qtbot: Any, window: MainWindow) -> None:
@@ -196,6 +208,26 @@ def test_browse_finished_run_file(qtbot: Any, window: MainWindow, tmp_path: Path
     assert fresh.live.n_points == 6
     assert fresh.views.spatial.n_rows == 3
     assert fresh.views.sweep.n_cells == 6
+    # a run file with no point measured: the views empty, not the last file's (before)
+    from daq.store import create_run
+    from protocols.runfile import ScanSpec
+
+    empty = tmp_path / "empty.h5"
+    run = read_run(tmp_path / "run.h5")
+    specs = [
+        ScanSpec(s.direction, s.amplitudes, s.amplitude_units, s.cylinders, s.time_s,
+                 s.f_center_Hz, s.cycles, s.width_s, s.averages, s.drive_units)
+        for s in run.scans.values()
+    ]  # fmt: skip
+    create_run(
+        empty, backend="sim", chain=run.chain, scans=specs, protocol_yaml="", bench_yaml="",
+        snapshot={}, seed=0,
+    ).close("aborted")  # fmt: skip
+    with qtbot.waitCallback(timeout=30_000) as cb:
+        fresh.open_run_file(empty, on_done=cb)
+    assert cb.args == [True] and fresh.live.n_points == 0
+    assert fresh.views.trace.c_vel.xData is None or len(fresh.views.trace.c_vel.xData) == 0
+    assert fresh.views.spatial.image.image is None
 
 
 @pytest.mark.parametrize("bad", ["missing.yaml"])
