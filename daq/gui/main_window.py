@@ -34,6 +34,7 @@ from daq.gui.live_data import LiveData
 from daq.gui.panels import BenchPanel, LogView, ProtocolPanel, RunPanel, format_duration
 from daq.gui.redraw_pace import FASTEST_MS, RedrawPace
 from daq.gui.views import LiveViews
+from daq.gui.window_words import in_window_words
 
 __all__ = ["Assembler", "MainWindow"]
 
@@ -212,6 +213,7 @@ class MainWindow(QMainWindow):
         file beside the run file while a run is on: :mod:`daq.logsetup`)."""
         levels = {"warning": logging.WARNING, "error": logging.ERROR}
         logging.getLogger("biafc.gui").log(levels.get(level, logging.INFO), message)
+        message = in_window_words(message)  # the window's controls, not run_protocol's flags
         self.log_view.add(message, level)
         if level != "info":
             self.statusBar().showMessage(message, 10000)
@@ -547,7 +549,7 @@ class MainWindow(QMainWindow):
         except RequestError as exc:  # refused before anything moved, as run_protocol's exit 2
             self.log(f"cannot start: {exc}", "error")
             self.run_panel.set_state("idle")
-            self.run_panel.where_label.setText(f"run refused: {exc}")
+            self.run_panel.where_label.setText(in_window_words(f"run refused: {exc}"))
             self.run_panel.where_label.setStyleSheet("QLabel { color: #b00000; }")
             return False
         if self.instruments is None:
@@ -694,7 +696,7 @@ class MainWindow(QMainWindow):
             reason = f": {d['reason']}" if d.get("reason") else ""
             line = f"run {status}{reason}"
         self.log(line, level)
-        self.run_panel.where_label.setText(line)
+        self.run_panel.where_label.setText(in_window_words(line))
         # unsafe: red and bold until the next run, and in the status bar (no modal dialog: the
         # person may be at the bench, the text stays until read)
         style = {"unsafe": "color: #b00000; font-weight: bold;", "complete": ""}.get(

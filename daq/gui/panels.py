@@ -176,6 +176,7 @@ class ProtocolPanel(QGroupBox):
         self.valid = False
         self.status_label.setStyleSheet("QLabel { color: #b00000; font-weight: bold; }")
         self.status_label.setText(f"✗ {message}")
+        self.fields.clear()  # the last valid protocol's values are not this text's
 
     def show_ok(self, message: str, fields: dict[str, str]) -> None:
         self.valid = True

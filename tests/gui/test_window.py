@@ -137,6 +137,8 @@ def test_validation_error_shown_in_protocol_panel(qtbot: Any, window: MainWindow
     qtbot.waitUntil(lambda: not pp.valid, timeout=2000)  # as you type (debounced)
     msg = pp.status_label.text()
     assert "smoke.yaml:5" in msg and "f_center" in msg and "unit" in msg, msg
+    # the resolved fields go with the error: before, the last valid values stayed beside it
+    assert pp.fields.topLevelItemCount() == 0
     assert not window.start_run()
     assert window.engine is None
     pp.editor.setPlainText(text.replace("cylinders: [1, 8, 16]", "cylinders: [1, 8, 99]"))
