@@ -751,7 +751,8 @@ class MainWindow(QMainWindow):
 
         def done(result: Any, err: BaseException | None) -> None:
             if err is not None:
-                self.log(f"{p}: {err}", "error")
+                text = str(err)  # most errors name the file already
+                self.log(text if str(p) in text else f"{p}: {text}", "error")
                 if on_done:
                     on_done(False)
                 return

@@ -385,3 +385,16 @@ def test_the_window_holds_the_console_while_it_runs(qapp: Any, monkeypatch: Any)
     monkeypatch.setattr("daq.logsetup.configure", lambda *a, **k: None)
     assert app.run_window(window_args()) == 0
     assert held[0].__func__ is StubWindow.console_closed and held[1] == "removed"
+
+
+def test_a_file_that_is_no_run_file_is_named_once(qtbot: Any, tmp_path: Path) -> None:
+    """Before: '…/bench.yaml: …/bench.yaml: not an HDF5 file'."""
+    win = MainWindow(None, None, assembler=make_assembler())
+    qtbot.addWidget(win)
+    bad = tmp_path / "bench.yaml"
+    bad.write_text("name: x\n")
+    with qtbot.waitCallback(timeout=30_000) as cb:
+        win.open_run_file(bad, on_done=cb)
+    assert cb.args == [False]
+    line = win.log_view.lines[-1]
+    assert line.count(str(bad)) == 1, line
