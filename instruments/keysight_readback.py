@@ -178,8 +178,11 @@ def _same(req: Any, got: Any) -> str | None:
 
 
 def _arb_name(req: str, got: str) -> str | None:
-    name = req.upper()
-    return None if got == name or got.endswith((":" + name, "\\" + name)) else "exact"
+    """The name asked for, as the guide's forms may give it back: bare, after a memory path
+    (``VOLATILE:``, ``INT:\\...\\``), with a ``.ARB`` file suffix, in any case (the reply's
+    exact form is not confirmed on an instrument)."""
+    name, reply = req.upper(), got.upper().removesuffix(".ARB")
+    return None if reply == name or reply.endswith((":" + name, "\\" + name)) else "exact"
 
 
 def _load(req: str, got: float) -> str | None:

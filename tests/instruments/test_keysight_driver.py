@@ -284,3 +284,15 @@ def test_an_unreadable_read_back_reply_is_a_reply_error_naming_the_query() -> No
     with pytest.raises(ReplyError, match=r"amplitude: unreadable SOUR1:VOLT\? reply 'garbage'"):
         KeysightGenerator(t, LIMITS).configure_burst(1, CFG)
     assert t.done
+
+
+@pytest.mark.parametrize(
+    "reply", ['"BIAFC1"', '"VOLATILE:BIAFC1"', '"INT:\\\\BIAFC1.ARB"', '"biafc1.arb"']
+)
+def test_the_arb_name_reads_back_in_any_of_the_guides_forms(reply: str) -> None:
+    """The FUNC:ARB? reply's exact form is not confirmed on an instrument; a file suffix or
+    another case failed the configuration before."""
+    from instruments.keysight_readback import _arb_name
+
+    assert _arb_name("BIAFC1", reply.strip('"')) is None
+    assert _arb_name("BIAFC1", "EXP_RISE") == "exact"
