@@ -61,14 +61,118 @@ def _numba_threads_env(n_workers: int) -> dict[str, str]:
     }
 
 
+class SchedulerUnreachable(Exception):
+    """No Dask scheduler answers at the address given (one line: the address, why, what to
+    check)."""
+
+
+#: how long connecting to a ``--scheduler`` may take (s)
+CONNECT_S = 10.0
+#: how long a cluster may have no worker before the study says so (s)
+NO_WORKER_S = 15.0
+
+
+def connect_scheduler(address: str, timeout_s: float = CONNECT_S) -> Any:
+    """A ``distributed.Client`` of the scheduler at ``address``, or :class:`SchedulerUnreachable`
+    within about ``timeout_s``: an address nobody listens on timed out only after 30 s, and a
+    port where another service answers (the scheduler's own dashboard, 8787) hung for ever or
+    ended in a MemoryError from its reply. The connection is made on a thread of its own, so a
+    handshake that never ends cannot hold the command."""
+    import socket
+    import threading
+    from urllib.parse import urlsplit
+
+    from distributed import Client
+
+    hint = "start one (dask scheduler) or check the address, e.g. tcp://host:8786"
+    where = urlsplit(address if "://" in address else f"tcp://{address}")
+    if where.scheme == "tcp" and where.hostname and where.port:
+        try:  # nobody listening: say so at once (distributed retries until its timeout)
+            socket.create_connection((where.hostname, where.port), timeout=timeout_s).close()
+        except OSError as exc:
+            raise SchedulerUnreachable(
+                f"{address}: nothing answers there ({exc.strerror or exc}): {hint}"
+            ) from None
+    box: dict[str, Any] = {}
+
+    def work() -> None:
+        try:
+            box["client"] = Client(address, timeout=f"{timeout_s}s")
+        except BaseException as exc:
+            box["error"] = exc
+
+    thread = threading.Thread(target=work, name="biafc-study-connect", daemon=True)
+    thread.start()
+    thread.join(timeout_s + 5.0)
+    if thread.is_alive():
+        raise SchedulerUnreachable(
+            f"{address}: no Dask scheduler answered within {timeout_s:g} s (is this the "
+            f"scheduler's port, not its dashboard's?): {hint}"
+        )
+    if "error" in box:
+        why: BaseException = box["error"]
+        first = str(why).splitlines()[0] if str(why) else ""
+        raise SchedulerUnreachable(
+            f"{address}: no Dask scheduler there ({type(why).__name__}: {first[:200]}): {hint}"
+        )
+    return box["client"]
+
+
+def n_workers(client: Any) -> int:
+    """Workers connected to ``client``'s scheduler now."""
+    return len(client.scheduler_info().get("workers", {}))
+
+
+@contextmanager
+def no_worker_notice(
+    client: Any, note: Callable[[str], None], after_s: float = NO_WORKER_S
+) -> Iterator[None]:
+    """While the block runs, say once per outage when the cluster has had no worker for
+    ``after_s`` s (before, the study waited without a word: a scheduler started without
+    workers, or its last worker killed)."""
+    import threading
+
+    stop = threading.Event()
+    address = getattr(getattr(client, "scheduler", None), "address", "the scheduler")
+
+    def watch() -> None:
+        since: float | None = None
+        said = False
+        while not stop.wait(1.0):
+            try:
+                none = n_workers(client) == 0
+            except Exception:  # the client closing under us: nothing to say
+                return
+            now = time.monotonic()
+            if not none:
+                since, said = None, False
+            elif since is None:
+                since = now
+            elif not said and now - since >= after_s:
+                said = True
+                note(
+                    f"no worker connected to {address} for {after_s:g} s: the study waits; "
+                    f"start one (dask worker {address}) or press Ctrl-C (the output keeps every "
+                    "finished task)"
+                )
+
+    thread = threading.Thread(target=watch, name="biafc-study-workers", daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        thread.join(5.0)
+
+
 @contextmanager
 def dask_client(workers: int, scheduler: str | None = None) -> Iterator[Any]:
-    """A ``distributed.Client``: of the cluster at ``scheduler``, or of a new LocalCluster of
-    ``workers`` processes (closed on exit)."""
-    from distributed import Client, LocalCluster
+    """A ``distributed.Client``: of the cluster at ``scheduler`` (:func:`connect_scheduler`), or
+    of a new LocalCluster of ``workers`` processes (closed on exit)."""
+    from distributed import LocalCluster
 
     if scheduler is not None:
-        client = Client(scheduler, timeout="30s")
+        client = connect_scheduler(scheduler)
         try:
             yield client
         finally:
@@ -82,6 +186,8 @@ def dask_client(workers: int, scheduler: str | None = None) -> Iterator[Any]:
         silence_logs=logging.ERROR,
         env=_numba_threads_env(workers),
     )
+    from distributed import Client
+
     try:
         client = Client(cluster)
         try:
@@ -131,8 +237,7 @@ def run_study(
 
     from distributed import as_completed
 
-    n_workers = max(1, len(client.scheduler_info().get("workers", {})))
-    limit = max(1, in_flight_per_worker * n_workers)
+    limit = max(1, in_flight_per_worker * max(1, n_workers(client)))
     queue = iter(todo)
 
     outstanding: dict[str, tuple[int, Any]] = {}
@@ -158,7 +263,8 @@ def run_study(
         for _, other in outstanding.values():
             other.cancel()
         raise
-    engine = f"dask ({n_workers} workers)"
+    now = n_workers(client)  # at the end: a killed worker is not counted
+    engine = f"dask ({now} worker{'' if now == 1 else 's'})"
     return RunSummary(
         len(todo), n_done - skipped, skipped, time.perf_counter() - t0, task_s, engine
     )

@@ -50,14 +50,10 @@ def run(args: argparse.Namespace) -> int:
     from analysis.study_cells import (
         StudySetup,
         check_cells,
-        spectrum_grid_Hz,
-        stored_names,
         task_cells,
     )
     from daq.store.disk_space import no_margin
-    from daq.store.lock import FileInUse, RunFileLock
     from protocols.study import cell_table, load_study
-    from protocols.studyfile import StudyFileError, StudyStore
     from protocols.yamlfile import ConfigError
     from sim_backend.dem.integrators import integrator_error
     from sim_backend.dem.spec import ChainFileError, default_chain_spec, load_chain_spec
@@ -92,6 +88,38 @@ def run(args: argparse.Namespace) -> int:
     short = no_margin(out)  # an output made on a full disk may be unreadable
     if short is not None:
         raise CliError(short)
+    from daq.study_runner import SchedulerUnreachable, connect_scheduler
+
+    client = None
+    if args.scheduler is not None:  # before the output is made: refused, exit 2, no file
+        try:
+            client = connect_scheduler(args.scheduler)
+        except SchedulerUnreachable as exc:
+            raise CliError(f"--scheduler {exc}") from None
+    try:
+        return _run_to(args, sf, base.to_yaml(), table, setup, digest, tasks, out, client)
+    finally:
+        if client is not None:
+            client.close()
+
+
+def _run_to(
+    args: argparse.Namespace,
+    sf: Any,
+    chain_yaml: str,
+    table: Any,
+    setup: Any,
+    digest: str,
+    tasks: list[Any],
+    out: Path,
+    client: Any,
+) -> int:
+    """Lock, open or create the output, then run (``client``: a connected scheduler's)."""
+    study = sf.study
+    from analysis.study_cells import spectrum_grid_Hz, stored_names
+    from daq.store.lock import FileInUse, RunFileLock
+    from protocols.studyfile import StudyFileError, StudyStore
+
     lock = RunFileLock(out)
     try:
         lock.acquire()
@@ -105,14 +133,14 @@ def run(args: argparse.Namespace) -> int:
                 grid = spectrum_grid_Hz(study) if study.record_spectra else None
                 store = StudyStore.create(
                     out, name=study.name, study_yaml=sf.text, digest=digest,
-                    chain_yaml=base.to_yaml(), table=table,
+                    chain_yaml=chain_yaml, table=table,
                     directions=study.drive.directions, metric_names=stored_names(study),
                     n_tasks=len(tasks), spectrum_freq_Hz=grid,
                 )  # fmt: skip
         except StudyFileError as exc:
             raise CliError(str(exc)) from None
         _announce(study, table, tasks, out)
-        return _run(args, setup, table, store)
+        return _run(args, setup, table, store, client)
     finally:
         lock.release()
 
@@ -126,13 +154,13 @@ def _announce(study: Any, table: Any, tasks: list[Any], out: Path) -> None:
     )
 
 
-def _run(args: argparse.Namespace, setup: Any, table: Any, store: Any) -> int:
+def _run(args: argparse.Namespace, setup: Any, table: Any, store: Any, client: Any) -> int:
     import numpy as np
 
     from analysis.study_cells import STATUS_FAILED, STATUS_INACCURATE
     from daq.progress import ProgressDisplay
     from daq.store.disk_space import DiskFull
-    from daq.study_runner import dask_client, run_study
+    from daq.study_runner import dask_client, no_worker_notice, run_study
     from protocols.left_open import exit_leaving_them
     from protocols.studyfile import StudyFileError
 
@@ -152,6 +180,9 @@ def _run(args: argparse.Namespace, setup: Any, table: Any, store: Any) -> int:
 
             if args.workers == 0:
                 summary = run_study(setup, table, store, on_task=on_task)
+            elif client is not None:
+                with no_worker_notice(client, progress.note):
+                    summary = run_study(setup, table, store, client=client, on_task=on_task)
             else:
                 workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
                 with dask_client(workers, args.scheduler) as client:
