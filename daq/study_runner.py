@@ -185,6 +185,7 @@ def dask_client(workers: int, scheduler: str | None = None) -> Iterator[Any]:
         dashboard_address=None,
         silence_logs=logging.ERROR,
         env=_numba_threads_env(workers),
+        preload=["daq.study_worker"],  # a terminal's Ctrl-C is the study's, not each worker's
     )
     from distributed import Client
 

@@ -190,6 +190,7 @@ def _run(args: argparse.Namespace, setup: Any, table: Any, store: Any, client: A
         status = "complete"
     except KeyboardInterrupt:
         status = "incomplete"
+        print("the output keeps every finished task; run again to continue", file=sys.stderr)
         raise
     except Exception as exc:
         error = exc
