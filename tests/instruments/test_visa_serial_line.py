@@ -13,10 +13,13 @@ import select
 import sys
 import threading
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 import pytest
 
 from instruments.errors import InstrumentError, InstrumentTimeout
+from instruments.interfaces import Transport
 from instruments.polytec import PolytecVibrometer
 from instruments.transport import open_transport
 
@@ -50,37 +53,10 @@ def _controller(fd: int, stop: threading.Event) -> None:
                 os.write(fd, REPLIES[line])
 
 
-def test_a_late_reply_on_a_visa_serial_line_does_not_answer_the_next_query() -> None:
-    pytest.importorskip("pyvisa_py")
-    import tty
-
-    far, near = os.openpty()
-    tty.setraw(near)
-    stop = threading.Event()
-    thread = threading.Thread(target=_controller, args=(far, stop), daemon=True)
-    thread.start()
-    transport = open_transport(
-        f"ASRL{os.ttyname(near)}::INSTR", name="vibrometer", timeout_s=0.5, baud_rate=115200
-    )
-    try:
-        vib = PolytecVibrometer(transport)
-        with pytest.raises(InstrumentTimeout):
-            vib.signal_level()
-        time.sleep(LATE_S)  # the late "512" now waits on the line
-        assert vib.velocity_range() == "VD-09 50mm/s/V"
-        assert vib.velocity_range() == "VD-09 50mm/s/V"
-    finally:
-        stop.set()
-        thread.join(2)
-        transport.close()
-        os.close(far)
-        os.close(near)
-
-
-@pytest.mark.parametrize("kind", ["visa", "pyserial"])
-def test_a_micro_sign_in_a_reply_reads_on_both_transports(kind: str) -> None:
-    """PLACE's OFV-5000 driver met a micro sign in a reply in the lab; both transports decoded
-    replies as strict ASCII, so the vibrometer's snapshot (its signal delay) failed."""
+@contextmanager
+def controller_line(kind: str = "visa") -> Iterator[Transport]:
+    """The transport to the far end on a pseudo terminal: a VISA ``ASRL`` resource on
+    pyvisa-py (``"visa"``) or the port itself on pyserial (``"pyserial"``)."""
     pytest.importorskip("pyvisa_py")
     import tty
 
@@ -93,15 +69,33 @@ def test_a_micro_sign_in_a_reply_reads_on_both_transports(kind: str) -> None:
     resource = f"ASRL{port}::INSTR" if kind == "visa" else port
     transport = open_transport(resource, name="vibrometer", timeout_s=0.5, baud_rate=115200)
     try:
-        vib = PolytecVibrometer(transport)
-        assert vib.signal_delay_s() == pytest.approx(7.3e-6)
-        assert transport.query("Get,VeloDec,1,MaxFreq") == "2.5 MHz \u00b5"
+        yield transport
     finally:
         stop.set()
         thread.join(2)
         transport.close()
         os.close(far)
         os.close(near)
+
+
+def test_a_late_reply_on_a_visa_serial_line_does_not_answer_the_next_query() -> None:
+    with controller_line() as transport:
+        vib = PolytecVibrometer(transport)
+        with pytest.raises(InstrumentTimeout):
+            vib.signal_level()
+        time.sleep(LATE_S)  # the late "512" now waits on the line
+        assert vib.velocity_range() == "VD-09 50mm/s/V"
+        assert vib.velocity_range() == "VD-09 50mm/s/V"
+
+
+@pytest.mark.parametrize("kind", ["visa", "pyserial"])
+def test_a_micro_sign_in_a_reply_reads_on_both_transports(kind: str) -> None:
+    """PLACE's OFV-5000 driver met a micro sign in a reply in the lab; both transports decoded
+    replies as strict ASCII, so the vibrometer's snapshot (its signal delay) failed."""
+    with controller_line(kind) as transport:
+        vib = PolytecVibrometer(transport)
+        assert vib.signal_delay_s() == pytest.approx(7.3e-6)
+        assert transport.query("Get,VeloDec,1,MaxFreq") == "2.5 MHz \u00b5"
 
 
 @pytest.mark.skipif(sys.platform == "win32", reason="ASRL3 is COM3 there")
