@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import logging
 import os
+import threading
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -28,6 +29,7 @@ from numpy.typing import NDArray
 
 from analysis.study_cells import StudySetup, TaskResult, run_task, task_cells
 from daq.store.disk_space import room_for_a_task
+from instruments.beside import beside
 from protocols.study import CellTable
 from protocols.studyfile import StudyStore
 
@@ -130,12 +132,9 @@ def no_worker_notice(
     """While the block runs, say once per outage when the cluster has had no worker for
     ``after_s`` s (before, the study waited without a word: a scheduler started without
     workers, or its last worker killed)."""
-    import threading
-
-    stop = threading.Event()
     address = getattr(getattr(client, "scheduler", None), "address", "the scheduler")
 
-    def watch() -> None:
+    def watch(stop: threading.Event) -> None:
         since: float | None = None
         said = False
         while not stop.wait(1.0):
@@ -156,13 +155,8 @@ def no_worker_notice(
                     "finished task)"
                 )
 
-    thread = threading.Thread(target=watch, name="biafc-study-workers", daemon=True)
-    thread.start()
-    try:
+    with beside(watch, "biafc-study-workers", join_s=5.0):
         yield
-    finally:
-        stop.set()
-        thread.join(5.0)
 
 
 @contextmanager

@@ -33,6 +33,8 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+from instruments.beside import beside
+
 __all__ = [
     "CompileReporter",
     "announce_if_cold",
@@ -169,10 +171,9 @@ def compile_notice(delay_s: float = 1.0, tick_s: float = 1.0) -> Iterator[None]:
     cold = not kernel_cached_on_disk()
     folder = kernel_cache_dir()
     t0 = time.monotonic()
-    stop = threading.Event()
     started = threading.Event()
 
-    def watch() -> None:
+    def watch(stop: threading.Event) -> None:
         if stop.wait(0.0 if cold else delay_s):
             return
         started.set()
@@ -181,13 +182,10 @@ def compile_notice(delay_s: float = 1.0, tick_s: float = 1.0) -> Iterator[None]:
         while not stop.wait(tick_s):
             reporter("tick", time.monotonic() - t0, folder, cold)
 
-    thread = threading.Thread(target=watch, name="biafc-compile-notice", daemon=True)
-    thread.start()
     try:
-        yield
+        with beside(watch, "biafc-compile-notice"):
+            yield
     finally:
-        stop.set()
-        thread.join()
         if started.is_set():
             reporter("done", time.monotonic() - t0, folder, cold)
         _ANNOUNCED = False
