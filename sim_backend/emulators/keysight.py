@@ -16,7 +16,9 @@ numbers in NR3 with 15 decimals (``+1.000000000000000E+00``; ``OUTPn:LOAD?`` ans
 From the guide's "Output Termination": the load is 1 ohm to 10 kohm or INF (default 50 ohm);
 changing it rescales the displayed amplitude and offset without an error (50 ohm -> INF
 doubles them); units become Vpp at high Z; and the load cannot be changed while the voltage
-limits are on (here: -221 "Settings conflict", the setting kept). From its "BURSt Subsystem":
+limits are on (here: -221 "Settings conflict", the setting kept); an amplitude or offset past
+the voltage limits is clipped to them and "Settings conflict" reported. From its "BURSt
+Subsystem":
 with an immediate trigger a burst longer than the burst period (``BURS:INT:PER``, 10 ms after a
 reset) raises the period to fit and reports "Settings conflict" (checked here as the burst,
 its trigger source or its period is set).
@@ -454,7 +456,15 @@ class KeysightEmulator:
         if ch.limit_on and (
             off + amp / 2 > ch.limit_high_V + 1e-9 or off - amp / 2 < ch.limit_low_V - 1e-9
         ):
-            raise ScpiError(-221, "Settings conflict;amplitude exceeds voltage limits")
+            # the guide's "Voltage limits": the setting is clipped to what the limits allow and
+            # "Settings conflict" reported (before: refused, the old value kept)
+            lo, hi = ch.limit_low_V, ch.limit_high_V
+            if key == "VOLT:OFFS" and amp <= hi - lo:
+                off = min(max(off, lo + amp / 2), hi - amp / 2)
+            else:  # the amplitude gives way (also for an offset its amplitude cannot fit)
+                off = min(max(off, lo), hi)
+                amp = max(0.0, 2 * min(hi - off, off - lo))
+            self.push_error(-221, "Settings conflict;amplitude exceeds voltage limits")
         ch.amplitude_Vpp, ch.offset_V = amp, off
 
     def _arb_dac(self, n: int, arg: str, block: bytes | None) -> None:

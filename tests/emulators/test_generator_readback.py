@@ -44,6 +44,12 @@ def test_emulator_answers_queries_as_the_guide_gives_them() -> None:
     w("OUTP1:LOAD 50")  # not while the limits are on
     assert q("OUTP1:LOAD?") == "+9.9E+37"
     assert q("SYST:ERR?") == '-221,"Settings conflict"'
+    # past the limits (+/-5 V here) a level is clipped to them, and a conflict reported
+    w("SOUR1:VOLT:LIM:HIGH 2")
+    w("SOUR1:VOLT:LIM:LOW -2")
+    w("SOUR1:VOLT 6")  # 3 V peak: clipped to 4 Vpp
+    assert q("SOUR1:VOLT?") == "+4.000000000000000E+00"
+    assert q("SYST:ERR?").startswith("-221,")
 
 
 def test_read_back_is_what_the_snapshot_records() -> None:
