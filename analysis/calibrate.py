@@ -306,6 +306,11 @@ class CalibrationResult:
             f"{self.residual_after:.4f} after ({self.n_evaluations} model evaluations, "
             f"{self.wall_s:.1f} s)"
         )
+        lines.append(
+            "the +/- are statistical: the spread a repeat would give were the model exact; the "
+            "model's own error is not in them (judge the fit by its residual against the noise "
+            "floor: biafc compare)"
+        )
         if self.dem_stage:
             st = self.dem_stage
             lines.append(

@@ -224,8 +224,9 @@ def compare_runs(run: RunData, predicted: RunData, clip_m_per_s: float) -> Compa
             time_residual=t_res,
             spectral_residual=s_res,
             noise_residual=n_res,
-            measured_sweep=amplitude_sweep(scan, run.chain),
-            predicted_sweep=amplitude_sweep(pscan, run.chain),
+            # both against the band edges of the chain the prediction was made with
+            measured_sweep=amplitude_sweep(scan, predicted.chain),
+            predicted_sweep=amplitude_sweep(pscan, predicted.chain),
         )
     all_cyl = sorted({int(c) for s in run.scans.values() for c in s.cylinders})
     t_c = np.full(len(all_cyl), np.nan)

@@ -14,6 +14,7 @@
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import math
 import time
@@ -33,8 +34,8 @@ from analysis.model_run import (
     run_setup,
 )
 from analysis.spatial import spatial_frequency_map
-from protocols.runfile import RunData
-from sim_backend.dem import ChainSpec, build_chain
+from protocols.runfile import ChainInfo, RunData
+from sim_backend.dem import ChainSpec, build_chain, quasi_bands
 
 __all__ = ["CompareReport", "compare_run"]
 
@@ -51,6 +52,9 @@ class CompareReport:
     files: dict[str, list[Path]] = field(default_factory=dict)
     json_path: Path | None = None
     csv_path: Path | None = None
+    #: the run file's status (``complete``, ``aborted``, ...) and the model's solver
+    run_status: str = "complete"
+    solver: str = "dem"
 
     def text(self) -> str:
         s = self.setup
@@ -69,8 +73,13 @@ class CompareReport:
         )
         lines.append(
             f"model: diameter {self.chain_spec.diameter * 1e3:.4g} mm, preload "
-            f"{self.chain_spec.preload:.4g} N, {self.model_s:.1f} s"
+            f"{self.chain_spec.preload:.4g} N, solver {self.solver}, {self.model_s:.1f} s"
         )
+        if self.run_status != "complete":  # before, an aborted run was not said to be one
+            lines.append(
+                f"the run file is {self.run_status}: its points not measured are marked, not "
+                "compared"
+            )
         lines.append(format_table(self.comparison))
         return "\n".join(x for x in lines if x)
 
@@ -95,12 +104,30 @@ def compare_run(
     t0 = time.perf_counter()
     prediction = predict(setup, chain, solver=solver)
     model_s = time.perf_counter() - t0
-    pred = predicted_run(run, prediction)
+    # the prediction carries the chain it was made with: its band edges, not the file's, are
+    # what the figures draw (before, --chain drew the run file's chain's edges)
+    pred = dataclasses.replace(predicted_run(run, prediction), chain=_chain_info(chain, run))
     cmp = compare_runs(run, pred, setup.clip_m_per_s)
     report = CompareReport(cmp, setup, spec, pred, model_s)
+    report.run_status, report.solver = str(run.attrs.get("status", "unknown")), solver
     if out_dir is not None:
         _write(report, run, Path(out_dir))
     return report
+
+
+def _chain_info(chain: Any, run: RunData) -> ChainInfo:
+    """The run file's ``/chain`` view of the built ``chain`` (as many bands as the file's)."""
+    n_bands = np.atleast_2d(run.chain.onset_Hz).shape[1]
+    bands = quasi_bands(chain, min(n_bands, chain.n_modes + 1))
+    return dataclasses.replace(
+        run.chain,
+        lengths_m=np.asarray(chain.lengths_m, dtype=np.float64),
+        diameter_m=float(chain.diameter_m),
+        f0_N=float(chain.f0_N),
+        beta_c=float(chain.beta_c),
+        onset_Hz=np.asarray(bands.onset_Hz, dtype=np.float64),
+        cutoff_Hz=np.asarray(bands.cutoff_Hz, dtype=np.float64),
+    )
 
 
 def _write(report: CompareReport, run: RunData, out: Path) -> None:
@@ -114,7 +141,7 @@ def _write(report: CompareReport, run: RunData, out: Path) -> None:
 
     out.mkdir(parents=True, exist_ok=True)
     cmp, pred = report.comparison, report.predicted
-    onset, cutoff = band_edges(run.chain)
+    onset, cutoff = band_edges(pred.chain)  # the modelled chain's
     for d, dc in cmp.directions.items():
         scan, pscan = run.scans[d], pred.scans[d]
         f_range = dc.measured_sweep.f_range_Hz
@@ -152,6 +179,7 @@ def _write(report: CompareReport, run: RunData, out: Path) -> None:
     summary: dict[str, Any] = cmp.as_dict()
     s = report.setup
     summary["run_file"] = run.path.name
+    summary["run_status"] = report.run_status
     summary["model"] = {
         "chain": report.chain_spec.model_dump(mode="json"),
         "amplifier_gain_V_per_V": s.amplifier_gain_V_per_V,
@@ -159,6 +187,7 @@ def _write(report: CompareReport, run: RunData, out: Path) -> None:
         "bench_piezo_stroke_m_per_V": s.bench_stroke_m_per_V,
         "vibrometer_clip_m_per_s": s.clip_m_per_s if math.isfinite(s.clip_m_per_s) else None,
         "model_s": report.model_s,
+        "solver": report.solver,
     }
     summary["points_per_direction"] = {
         d: {

@@ -47,9 +47,11 @@ def plot_compare_spatial(
     are marked along the bottom (``state [C]``)."""
     finite = measured.magnitude[np.isfinite(measured.magnitude)]
     ref = float(finite.max()) if finite.size and finite.max() > 0 else None
-    if ref is None:
+    ref_name = "measured"
+    if ref is None:  # nothing measured: the model's own maximum, and the label says so
         pf = predicted.magnitude[np.isfinite(predicted.magnitude)]
         ref = float(pf.max()) if pf.size and pf.max() > 0 else 1.0
+        ref_name = "model"
     with style():
         fig, axs = new_figure(1, 2, figsize=(11.0, 4.6), sharey=True, sharex=True)
         mesh = None
@@ -88,7 +90,7 @@ def plot_compare_spatial(
         axs[0, 0].set_ylabel("frequency (kHz)")
         axs[0, 0].legend(loc="upper right", fontsize=8, framealpha=0.85)
         assert mesh is not None
-        fig.colorbar(mesh, ax=list(axs[0]), label="|V| (dB re measured max)")
+        fig.colorbar(mesh, ax=list(axs[0]), label=f"|V| (dB re {ref_name} max)")
     return fig
 
 
@@ -141,11 +143,15 @@ def plot_compare_sweep(cmp: Comparison) -> Figure:
             x = ms.amplitudes / factor
             st = dc.sweep_state()
             good = st == "ok"
-            ax_t.plot(x, ps.transmission, "-", color=colour, lw=1.2, label=f"{d.upper()} model")
+            # a line and small dots: one amplitude is a line through one point, which drew
+            # nothing though the legend named it
+            ax_t.plot(x, ps.transmission, ".-", color=colour, lw=1.2, ms=4,
+                      label=f"{d.upper()} model")  # fmt: skip
             ax_t.plot(
                 x[good], ms.transmission[good], "o", color=colour, label=f"{d.upper()} measured"
             )
-            ax_f.plot(x, ps.output_Hz / 1e3, "-", color=colour, lw=1.2, label=f"{d.upper()} model")
+            ax_f.plot(x, ps.output_Hz / 1e3, ".-", color=colour, lw=1.2, ms=4,
+                      label=f"{d.upper()} model")  # fmt: skip
             ax_f.plot(
                 x[good], ms.output_Hz[good] / 1e3, "o", color=colour, label=f"{d.upper()} measured"
             )

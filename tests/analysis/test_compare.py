@@ -106,3 +106,24 @@ def test_cli_refuses_a_bad_chain_file_in_one_line(
     assert "diameter" in err and len(err.splitlines()) == 1
     assert biafc(["compare", str(scan), "--piezo-stroke", "0.04 um"]) == 2
     assert "per volt" in capsys.readouterr().err
+
+
+def test_the_band_edges_are_the_modelled_chains_and_an_incomplete_run_is_said(
+    scan: Path,
+) -> None:
+    """With ``--chain`` the figures drew the run file's chain's band edges beside the other
+    chain's prediction (cylinder 1's onset 8.27 kHz for 8.10), and an aborted run was compared
+    without a word of it."""
+    import dataclasses
+
+    from sim_backend.dem import build_chain, quasi_bands
+
+    run = read_run(scan)
+    wrong = default_chain_spec().model_copy(update={"diameter": 14.4e-3})
+    report = compare_run(run, None, chain_spec=wrong)
+    bands = quasi_bands(build_chain(wrong), np.atleast_2d(run.chain.onset_Hz).shape[1])
+    assert np.allclose(report.predicted.chain.onset_Hz, bands.onset_Hz)
+    assert not np.allclose(report.predicted.chain.onset_Hz, run.chain.onset_Hz)
+    assert "the run file is" not in report.text() and "solver dem" in report.text()
+    aborted = dataclasses.replace(run, attrs={**run.attrs, "status": "aborted"})
+    assert "the run file is aborted" in compare_run(aborted, None).text()
