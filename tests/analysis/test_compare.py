@@ -127,3 +127,31 @@ def test_the_band_edges_are_the_modelled_chains_and_an_incomplete_run_is_said(
     assert "the run file is" not in report.text() and "solver dem" in report.text()
     aborted = dataclasses.replace(run, attrs={**run.attrs, "status": "aborted"})
     assert "the run file is aborted" in compare_run(aborted, None).text()
+
+
+def test_the_figures_say_what_they_scale_to_and_draw_one_amplitudes_model(scan: Path) -> None:
+    """Nothing measured: the map was labelled "dB re measured max" while scaled to the model's;
+    one amplitude: the model's sweep was a line through one point, drawn as nothing."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from analysis.plots.compare_plot import plot_compare_spatial, plot_compare_sweep
+    from analysis.spatial import SpatialFrequencyMap
+
+    cyl = np.array([1, 2, 3], dtype=np.int32)
+    f = np.linspace(1e3, 2e4, 50)
+    empty = SpatialFrequencyMap(cyl, f, np.full((3, 50), np.nan), np.full(3, np.nan))
+    model = SpatialFrequencyMap(cyl, f, np.ones((3, 50)), np.full(3, 9e3))
+    fig = plot_compare_spatial(empty, model, np.array(["pending"] * 3), f[:3], f[3:6], 9e3, "x")
+    assert any("dB re model max" in ax.get_ylabel() for ax in fig.axes)
+    one = write_synthetic_scan(
+        scan.with_name("one.h5"),
+        true_spec=default_chain_spec(),
+        amplitudes_m=(2e-6,),
+        cylinders=CYL,
+        duration_s=8e-3,
+    )
+    cmp = compare_run(read_run(one), None).comparison
+    lines = [ln for ax in plot_compare_sweep(cmp).axes for ln in ax.get_lines()]
+    model = [ln for ln in lines if str(ln.get_label()).endswith("model")]
+    assert model and all(ln.get_marker() not in ("None", "", None) for ln in model)
