@@ -29,7 +29,7 @@ import numpy as np
 
 from analysis.display import amplitude_label
 from analysis.sweep import AmplitudeSweep, amplitude_sweep, output_peak_definition
-from protocols.runfile import RunData
+from protocols.runfile import PointState, RunData
 
 __all__ = [
     "DETUNING_MIN_FRACTION",
@@ -104,17 +104,24 @@ def summarize(run: RunData) -> dict[str, Any]:
     rows: list[dict[str, Any]] = []
     far: dict[str, int] = {}
     peak: dict[str, str] = {}
+    points: dict[str, dict[str, int]] = {}
     for direction, scan in run.scans.items():
         sweep = amplitude_sweep(scan, run.chain)
         far[direction] = sweep.far
         peak[direction] = output_peak_definition(sweep)
         rows.extend(summary_rows(sweep))
+        points[direction] = {
+            "measured": int(np.count_nonzero(scan.done == PointState.DONE)),
+            "failed": int(np.count_nonzero(scan.done == PointState.FAILED)),
+            "pending": int(np.count_nonzero(scan.done == PointState.PENDING)),
+        }
     return {
         "file": str(run.path),
         "status": run.status,
         "backend": run.backend,
         "far_cylinder": far,
         "output_peak": peak,
+        "points": points,
         "rows": rows,
     }
 
@@ -125,8 +132,15 @@ def format_summary(summary: dict[str, Any]) -> str:
     def khz(v: float | None) -> str:
         return "-" if v is None else f"{v / 1e3:.3f}"
 
+    counts = summary.get("points", {})
     lines = [
         f"{summary['file']}  status={summary['status']}  backend={summary['backend']}",
+        *(
+            f"points {d}: {c['measured']} measured, {c['failed']} failed, {c['pending']} not "
+            "measured (the figures hatch the last two)"
+            for d, c in counts.items()
+            if c["failed"] or c["pending"]
+        ),
         f"{'dir':4} {'amplitude':>12} {'f_in kHz':>9} {'f_out kHz':>9} {'detune kHz':>10} "
         f"{'expect kHz':>10} {'E_far/E_in':>10} {'gain':>7}  conversion",
     ]

@@ -39,7 +39,7 @@ __all__ = [
 #: formats every figure is written in
 FORMATS: tuple[str, ...] = ("png", "pdf")
 #: legend text of the hatched "not measured" background
-GAP_LABEL = "not measured"
+GAP_LABEL = "failed or not measured"  # both leave NaN: a failed point is not "not measured"
 
 RC: dict[str, Any] = {
     "font.size": 11,

@@ -154,6 +154,18 @@ def test_partial_run_draws_what_is_done_and_leaves_gaps(partial_run: Path, tmp_p
     m = spatial_frequency_map(scan.velocity[2], scan.cylinders, scan.sample_rate_Hz, (4e3, 13e3))
     assert np.all(np.isnan(m.magnitude[10:])) and np.all(np.isfinite(m.magnitude[:10]))
     assert np.all(np.isnan(m.peak_Hz[10:]))
+    # the points' counts are said (before: nothing said how many were failed or missing, and
+    # the figures' hatch called failed points "not measured")
+    n_ltr = 4 * 31
+    assert report.summary["points"]["ltr"] == {"measured": 3 * 31 - 21, "failed": 0,
+                                               "pending": 31 + 21}  # fmt: skip
+    assert f"points ltr: {3 * 31 - 21} measured, 0 failed, {31 + 21} not measured" in (
+        report.summary_text
+    )
+    assert sum(report.summary["points"]["ltr"].values()) == n_ltr
+    from analysis.plots.style import GAP_LABEL
+
+    assert GAP_LABEL == "failed or not measured"
 
 
 def test_partial_gaps_are_masked_in_the_drawn_map(partial_run: Path) -> None:
