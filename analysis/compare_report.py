@@ -118,16 +118,7 @@ def compare_run(
 def _chain_info(chain: Any, run: RunData) -> ChainInfo:
     """The run file's ``/chain`` view of the built ``chain`` (as many bands as the file's)."""
     n_bands = np.atleast_2d(run.chain.onset_Hz).shape[1]
-    bands = quasi_bands(chain, min(n_bands, chain.n_modes + 1))
-    return dataclasses.replace(
-        run.chain,
-        lengths_m=np.asarray(chain.lengths_m, dtype=np.float64),
-        diameter_m=float(chain.diameter_m),
-        f0_N=float(chain.f0_N),
-        beta_c=float(chain.beta_c),
-        onset_Hz=np.asarray(bands.onset_Hz, dtype=np.float64),
-        cutoff_Hz=np.asarray(bands.cutoff_Hz, dtype=np.float64),
-    )
+    return ChainInfo.of_model(chain, quasi_bands(chain, min(n_bands, chain.n_modes + 1)))
 
 
 def _write(report: CompareReport, run: RunData, out: Path) -> None:

@@ -4,8 +4,6 @@ from __future__ import annotations
 
 from typing import Any
 
-import numpy as np
-
 from protocols.bench import BenchFile
 from protocols.runfile import ChainInfo
 
@@ -36,11 +34,4 @@ def chain_info(bf: BenchFile, n_bands: int = 3) -> ChainInfo:
 
 def model_chain_info(chain: Any, bands: Any) -> ChainInfo:
     """The run file's ``/chain`` of a built ``sim_backend.dem.Chain`` and its ``Bands``."""
-    return ChainInfo(
-        lengths_m=np.asarray(chain.lengths_m, dtype=np.float64),
-        diameter_m=float(chain.diameter_m),
-        f0_N=float(chain.f0_N),
-        beta_c=float(chain.beta_c),
-        onset_Hz=np.asarray(bands.onset_Hz, dtype=np.float64),
-        cutoff_Hz=np.asarray(bands.cutoff_Hz, dtype=np.float64),
-    )
+    return ChainInfo.of_model(chain, bands)

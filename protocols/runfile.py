@@ -141,6 +141,19 @@ class ChainInfo:
     onset_Hz: NDArray[np.float64]
     cutoff_Hz: NDArray[np.float64]
 
+    @classmethod
+    def of_model(cls, chain: Any, bands: Any) -> ChainInfo:
+        """The view of a built ``sim_backend.dem.Chain`` and its ``Bands`` (duck-typed: this
+        layer does not import the model)."""
+        return cls(
+            lengths_m=np.asarray(chain.lengths_m, dtype=np.float64),
+            diameter_m=float(chain.diameter_m),
+            f0_N=float(chain.f0_N),
+            beta_c=float(chain.beta_c),
+            onset_Hz=np.asarray(bands.onset_Hz, dtype=np.float64),
+            cutoff_Hz=np.asarray(bands.cutoff_Hz, dtype=np.float64),
+        )
+
 
 @dataclass(frozen=True)
 class ScanSpec:

@@ -8,11 +8,10 @@ uses in-process transports. ``biafc check`` must find every instrument as the fi
 from __future__ import annotations
 
 import os
-import select
 import socket
 import sys
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -22,6 +21,7 @@ from instruments.clock import SystemClock
 from protocols.bench import default_bench_path
 from sim_backend.emulators import KeysightEmulator, PolytecEmulator, ZaberEmulator
 
+from .pty_line import serve_lines
 from .standin_nidaqmx import Card, install
 
 pytestmark = pytest.mark.skipif(
@@ -29,18 +29,18 @@ pytestmark = pytest.mark.skipif(
 )
 
 
-def _serve_line(fd: int, emulator: Any, stop: threading.Event, end: bytes) -> None:
-    buf = b""
-    while not stop.is_set():
-        ready, _, _ = select.select([fd], [], [], 0.05)
-        if not ready:
-            continue
-        buf += os.read(fd, 4096)
-        while b"\n" in buf:
-            line, buf = buf.split(b"\n", 1)
-            reply = emulator.handle(line.rstrip(b"\r"))
-            for out in [] if reply is None else reply.split("\n"):
-                os.write(fd, out.encode("latin-1") + end)
+def _answer(emulator: Any, end: bytes) -> Callable[[bytes], bytes | None]:
+    """The emulator's reply lines to a line, each ended by ``end``."""
+
+    def answer(line: bytes) -> bytes | None:
+        reply = emulator.handle(line)
+        return (
+            None
+            if reply is None
+            else b"".join(out.encode("latin-1") + end for out in reply.split("\n"))
+        )
+
+    return answer
 
 
 def _serve_socket(server: socket.socket, emulator: Any, stop: threading.Event) -> None:
@@ -87,7 +87,9 @@ def rig(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[Path]:
         tty.setraw(near)
         fds += [far, near]
         ports.append(os.ttyname(near))
-        threads.append(threading.Thread(target=_serve_line, args=(far, emulator, stop, end)))
+        threads.append(
+            threading.Thread(target=serve_lines, args=(far, _answer(emulator, end), stop))
+        )
     for t in threads:
         t.daemon = True
         t.start()

@@ -9,7 +9,6 @@ pyserial transport did): after one timeout every reply came one query late, so
 from __future__ import annotations
 
 import os
-import select
 import sys
 import threading
 import time
@@ -22,6 +21,8 @@ from instruments.errors import InstrumentError, InstrumentTimeout
 from instruments.interfaces import Transport
 from instruments.polytec import PolytecVibrometer
 from instruments.transport import open_transport
+
+from .pty_line import serve_lines
 
 pytestmark = pytest.mark.skipif(
     sys.platform == "win32" or not hasattr(os, "openpty"), reason="needs a pseudo terminal"
@@ -36,21 +37,12 @@ REPLIES = {
 LATE_S = 0.8  # the signal level's reply comes after the driver's 0.5 s timeout
 
 
-def _controller(fd: int, stop: threading.Event) -> None:
-    buf = b""
-    while not stop.is_set():
-        ready, _, _ = select.select([fd], [], [], 0.02)
-        if not ready:
-            continue
-        buf += os.read(fd, 4096)
-        while b"\n" in buf:
-            line, buf = buf.split(b"\n", 1)
-            line = line.rstrip(b"\r")
-            if line == b"Get,SignalLevel,0,Value":
-                time.sleep(LATE_S)
-                os.write(fd, b"512\n")
-            elif line in REPLIES:
-                os.write(fd, REPLIES[line])
+def _controller(line: bytes) -> bytes | None:
+    """The OFV-5000's answer to ``line``; the signal level's comes late."""
+    if line == b"Get,SignalLevel,0,Value":
+        time.sleep(LATE_S)
+        return b"512\n"
+    return REPLIES.get(line)
 
 
 @contextmanager
@@ -63,7 +55,7 @@ def controller_line(kind: str = "visa") -> Iterator[Transport]:
     far, near = os.openpty()
     tty.setraw(near)
     stop = threading.Event()
-    thread = threading.Thread(target=_controller, args=(far, stop), daemon=True)
+    thread = threading.Thread(target=serve_lines, args=(far, _controller, stop), daemon=True)
     thread.start()
     port = os.ttyname(near)
     resource = f"ASRL{port}::INSTR" if kind == "visa" else port
