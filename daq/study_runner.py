@@ -81,7 +81,6 @@ def connect_scheduler(address: str, timeout_s: float = CONNECT_S) -> Any:
     ended in a MemoryError from its reply. The connection is made on a thread of its own, so a
     handshake that never ends cannot hold the command."""
     import socket
-    import threading
     from urllib.parse import urlsplit
 
     from distributed import Client
@@ -160,18 +159,11 @@ def no_worker_notice(
 
 
 @contextmanager
-def dask_client(workers: int, scheduler: str | None = None) -> Iterator[Any]:
-    """A ``distributed.Client``: of the cluster at ``scheduler`` (:func:`connect_scheduler`), or
-    of a new LocalCluster of ``workers`` processes (closed on exit)."""
-    from distributed import LocalCluster
+def dask_client(workers: int) -> Iterator[Any]:
+    """A ``distributed.Client`` of a new LocalCluster of ``workers`` processes (closed on exit).
+    A running cluster's client comes from :func:`connect_scheduler`."""
+    from distributed import Client, LocalCluster
 
-    if scheduler is not None:
-        client = connect_scheduler(scheduler)
-        try:
-            yield client
-        finally:
-            client.close()
-        return
     cluster = LocalCluster(
         n_workers=workers,
         threads_per_worker=1,
@@ -181,8 +173,6 @@ def dask_client(workers: int, scheduler: str | None = None) -> Iterator[Any]:
         env=_numba_threads_env(workers),
         preload=["daq.study_worker"],  # a terminal's Ctrl-C is the study's, not each worker's
     )
-    from distributed import Client
-
     try:
         client = Client(cluster)
         try:

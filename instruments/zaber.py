@@ -303,7 +303,7 @@ class ZaberStage:
         flags = self.warnings()  # before anything that a latched flag would fail
         latched = [f for f in flags if f in _LATCHED]
         if latched:
-            self.command("warnings clear", check_flags=False)
+            self.clear_warnings()
             self._must_home = True
             log.warning(
                 "%s: cleared %s left from before (%s); the stage is homed before it moves",

@@ -185,7 +185,7 @@ def _run(args: argparse.Namespace, setup: Any, table: Any, store: Any, client: A
                     summary = run_study(setup, table, store, client=client, on_task=on_task)
             else:
                 workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
-                with dask_client(workers, args.scheduler) as client:
+                with dask_client(workers) as client:
                     summary = run_study(setup, table, store, client=client, on_task=on_task)
         status = "complete"
     except KeyboardInterrupt:

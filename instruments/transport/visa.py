@@ -98,16 +98,16 @@ class VisaTransport:
         import pyvisa.constants as vc
 
         ops = vc.BufferOperation
-        #: a serial line keeps a late reply in its receive buffer, to answer the next query;
-        #: pyvisa-py's serial session empties it on ``discard_read_buffer`` only, NI-VISA
-        #: without I/O on the read and receive buffers (viFlush)
-        self._discard: int | None = (
-            None
-            if not resource.upper().startswith("ASRL")
-            else int(ops.discard_read_buffer)
-            if backend == "@py"
-            else int(ops.discard_read_buffer_no_io | ops.discard_receive_buffer)
-        )
+        #: a serial line keeps a late reply in its receive buffer, to answer the next query:
+        #: every query empties it first (pyvisa-py's serial session does so on
+        #: ``discard_read_buffer`` only, NI-VISA without I/O on the read and receive buffers)
+        self._serial = resource.upper().startswith("ASRL")
+        if not self._serial:
+            self._flush_mask = int(ops.discard_read_buffer_no_io)
+        elif backend == "@py":
+            self._flush_mask = int(ops.discard_read_buffer)
+        else:
+            self._flush_mask = int(ops.discard_read_buffer_no_io | ops.discard_receive_buffer)
 
     @property
     def timeout_s(self) -> float:
@@ -143,24 +143,21 @@ class VisaTransport:
         """Device clear (IEEE 488.2 / VISA ``viClear``): the instrument drops its output queue
         and pending input; anything still waiting here is flushed too."""
         self._call("device clear", self._res.clear)
-        flush = getattr(self._res, "flush", None)
-        if flush is not None:
-            try:
-                import pyvisa.constants as vc
+        self._flush_input()
 
-                flush(vc.BufferOperation.discard_read_buffer_no_io)
-            except Exception:  # not every session has a read buffer to discard
-                pass
+    def _flush_input(self) -> None:
+        """Drop what waits to be read here (never raises: not every session has a buffer)."""
+        try:
+            self._res.flush(self._flush_mask)
+        except Exception:
+            pass
 
     def write(self, command: str) -> None:
         self._call(command, self._res.write, command)
 
     def query(self, command: str) -> str:
-        if self._discard is not None:  # a stale line must not answer this query
-            try:
-                self._res.flush(self._discard)
-            except Exception:
-                pass
+        if self._serial:  # a stale line must not answer this query
+            self._flush_input()
         return reread_as_utf8(str(self._call(command, self._res.query, command))).strip()
 
     def write_block(self, header: str, data: bytes) -> None:
