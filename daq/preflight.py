@@ -20,6 +20,7 @@ from numpy.typing import NDArray
 
 from daq.engine.instruments import BenchInstruments
 from instruments.errors import ReplyError
+from instruments.polytec import LevelAboveFullScale
 from protocols.bench import BenchFile
 
 __all__ = [
@@ -187,18 +188,15 @@ def _vibrometer(bf: BenchFile, vib: Any) -> list[Finding]:
     )
     try:
         level = float(vib.signal_level())
-    except ReplyError as exc:  # above the bench's level_full_scale: the findings above stand
-        out.append(
-            Finding(
-                "vibrometer",
-                "signal level here",
-                f"level_full_scale {b.vibrometer.level_full_scale:g}",
-                str(exc).splitlines()[0].split(": ", 1)[-1].split(" (vibrometer.")[0],
-                "MISMATCH",
-                "set vibrometer.level_full_scale (or commands: signal_level_get) for this "
-                "controller",
-            )
-        )
+    except ReplyError as exc:  # the findings above stand
+        if isinstance(exc, LevelAboveFullScale):
+            expected = f"level_full_scale {b.vibrometer.level_full_scale:g}"
+            got = f"signal level {exc.reading} is above the full scale {exc.full_scale:g}"
+            hint = "set vibrometer.level_full_scale to this controller's full scale"
+        else:
+            expected, got = "a number", str(exc).splitlines()[0]
+            hint = "check the signal-level command (vibrometer: commands: signal_level_get)"
+        out.append(Finding("vibrometer", "signal level here", expected, got, "MISMATCH", hint))
         return out
     out.append(
         Finding(

@@ -30,6 +30,7 @@ from instruments.interfaces import Transport
 __all__ = [
     "DEFAULT_COMMANDS",
     "VELOCITY_RANGES",
+    "LevelAboveFullScale",
     "PolytecSettings",
     "PolytecVibrometer",
     "parse_sensitivity",
@@ -172,6 +173,19 @@ def parse_si_value(text: str, unit: str) -> float:
         return parse_quantity(s, dimension)
     except UnitError:
         raise ReplyError(f"cannot read a value in {unit} from {text!r}") from None
+
+
+class LevelAboveFullScale(ReplyError):
+    """A signal-level reading above the bench file's ``vibrometer.level_full_scale``: the scale
+    is wrong for this controller (``reading`` as read, ``full_scale``)."""
+
+    def __init__(self, name: str, reading: str, full_scale: float) -> None:
+        self.reading, self.full_scale = reading, full_scale
+        super().__init__(
+            f"{name}: signal level {reading} is above the full scale {full_scale:g} "
+            "(vibrometer.level_full_scale in the bench file): set it to this controller's "
+            "reading with the beam on a good target"
+        )
 
 
 @dataclass(frozen=True)
@@ -330,11 +344,7 @@ class PolytecVibrometer:
             ) from None
         if value > s.level_full_scale:
             # clipping it to 1 would pass every point on a controller with a larger scale
-            raise ReplyError(
-                f"{self.transport.name}: signal level {raw} is above the full scale "
-                f"{s.level_full_scale:g} (vibrometer.level_full_scale in the bench file): set "
-                "it to this controller's reading with the beam on a good target"
-            )
+            raise LevelAboveFullScale(self.transport.name, raw, s.level_full_scale)
         return max(value / s.level_full_scale, 0.0)
 
     def check_signal(self) -> float:
