@@ -219,6 +219,7 @@ def _study_figures(args: argparse.Namespace, path: Path, data: StudyData) -> int
         rank_designs,
         varying_parameters,
     )
+    from instruments.units import format_quantity
 
     out = args.out or path.with_name(f"{path.stem}_figures")
     can_write(out, "--out")
@@ -238,7 +239,7 @@ def _study_figures(args: argparse.Namespace, path: Path, data: StudyData) -> int
         top = float(max(data.parameters["amplitude"]))
         map_fixed["amplitude"] = top
         kind = str(data.attrs.get("amplitude_kind", "displacement"))
-        shown = f"{top * 1e6:.3g} um" if kind == "displacement" else f"{top:.3g} N"
+        shown = format_quantity(top, "length" if kind == "displacement" else "force")
         print(
             f"maps at the largest drive amplitude, {shown} (--fix amplitude=... for another, "
             "--reduce mean to average over amplitudes)"
