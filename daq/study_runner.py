@@ -178,9 +178,25 @@ def dask_client(workers: int) -> Iterator[Any]:
         try:
             yield client
         finally:
-            client.close()
+            with _quiet_closing():
+                client.close()
     finally:
-        cluster.close()
+        with _quiet_closing():
+            cluster.close()
+
+
+@contextmanager
+def _quiet_closing() -> Iterator[None]:
+    """While the cluster closes: a task still in flight (an interrupted study) makes
+    ``distributed`` log its closed connection at INFO, with a traceback, in the study's
+    terminal. Warnings and errors still show."""
+    logger = logging.getLogger("distributed")
+    level = logger.level
+    logger.setLevel(max(level, logging.WARNING))
+    try:
+        yield
+    finally:
+        logger.setLevel(level)
 
 
 def run_study(

@@ -12,6 +12,8 @@ import importlib
 import sys
 from collections.abc import Sequence
 
+from daq.cli.stop_signals import StopSignal, stop_signals_interrupt
+
 #: subcommand -> (module under daq.cli, one-line help)
 SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "bands": ("bands", "per-cylinder quasi-band edges of a chain"),
@@ -66,16 +68,30 @@ def main(argv: Sequence[str] | None = None) -> int:
     module.add_arguments(sub_parser)
     args = sub_parser.parse_args(argv[1:])
     try:
-        return int(module.run(args) or 0)
+        if name == "gui":  # the window closes on them itself (daq.gui.stop_signals)
+            return int(module.run(args) or 0)
+        with stop_signals_interrupt():
+            return int(module.run(args) or 0)
     except CliError as exc:
         print(f"biafc {name}: error: {exc}", file=sys.stderr)
         return 2
+    except StopSignal as exc:  # SIGTERM, SIGHUP: through the Ctrl-C path, files closed
+        _say(f"biafc {name}: interrupted by {exc}")
+        return 128 + exc.signum
     except KeyboardInterrupt:
         print(f"biafc {name}: interrupted", file=sys.stderr)
         return 130
     except BrokenPipeError:  # the reader stopped early (biafc bands | head): not a failure
         _quiet_stdout()
         return 0
+
+
+def _say(line: str) -> None:
+    """One line to stderr, and nothing when it is gone (SIGHUP: the terminal closed)."""
+    try:
+        print(line, file=sys.stderr, flush=True)
+    except (OSError, ValueError):
+        pass
 
 
 def _quiet_stdout() -> None:

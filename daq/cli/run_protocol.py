@@ -22,7 +22,6 @@ time it took is shown.
 from __future__ import annotations
 
 import argparse
-import os
 import signal
 import sys
 import threading
@@ -32,7 +31,7 @@ from types import FrameType
 from typing import Any, TextIO
 
 from daq.cli.biafc import CliError
-from daq.cli.stop_signals import stop_signals
+from daq.cli.stop_signals import leave_the_terminal, stop_signals
 
 __all__ = ["add_arguments", "main", "run"]
 
@@ -187,22 +186,6 @@ ABORT_BOUND_S = 5.0
 CLOSE_GRACE_S = 2.0
 
 
-def _leave_the_terminal() -> None:
-    """After SIGHUP: the terminal is gone, and a write to it could fail or block the abort. The
-    standard output and error go to the null device from here on; the run's log file
-    (``RUN.log``) and the run file keep the outcome."""
-    try:
-        sys.stdout.flush()
-    except (OSError, ValueError):
-        pass
-    null = os.open(os.devnull, os.O_WRONLY)
-    try:
-        os.dup2(null, 1)
-        os.dup2(null, 2)
-    finally:
-        os.close(null)
-
-
 class _SignalGate:
     """SIGINT/SIGTERM (and SIGHUP, :func:`stop_signals`) from the first moment of ``main``:
     before the engine exists a signal stops at once (nothing was switched on); during the run
@@ -246,7 +229,7 @@ class _SignalGate:
         :data:`~daq.cli.console_close.CLOSE_BOUND_S` in all."""
         from daq.cli.console_close import CLOSE_BOUND_S
 
-        _leave_the_terminal()
+        leave_the_terminal()
         if not self.ran:
             return  # nothing driven yet: nothing to put in a safe state
         self.interrupted.append(what)
@@ -272,7 +255,7 @@ class _SignalGate:
     def __call__(self, signum: int, frame: FrameType | None) -> None:
         name = signal.Signals(signum).name
         if name == "SIGHUP":
-            _leave_the_terminal()
+            leave_the_terminal()
         if self._forced:
             self._forced = False
             name = self.interrupted[0] if self.interrupted else name
@@ -366,7 +349,7 @@ def _execute(
     try:
         print(line, file=sys.stdout if code == ExitCode.COMPLETE else sys.stderr, flush=True)
     except OSError:  # the terminal is gone (SIGHUP ignored): the log file has the line
-        _leave_the_terminal()
+        leave_the_terminal()
     if files_left_open():  # HDF5's clean-up crashes the process at its exit (139)
         exit_leaving_them(int(code))
     return int(code)

@@ -7,9 +7,24 @@ signal Python could handle in time: :mod:`daq.cli.console_close`.)"""
 
 from __future__ import annotations
 
+import os
 import signal
+import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
+from types import FrameType
 
-__all__ = ["stop_signals"]
+__all__ = ["StopSignal", "leave_the_terminal", "stop_signals", "stop_signals_interrupt"]
+
+
+class StopSignal(KeyboardInterrupt):
+    """A stop signal other than SIGINT, raised where Ctrl-C's KeyboardInterrupt would be, so
+    that a command ends through its Ctrl-C path (files closed, the same advice printed).
+    ``signum``: the signal; the exit status is 128 + it."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
 
 
 def stop_signals() -> tuple[int, ...]:
@@ -23,3 +38,40 @@ def stop_signals() -> tuple[int, ...]:
     if hup is not None and signal.getsignal(hup) is not signal.SIG_IGN:
         out.append(hup)
     return tuple(out)
+
+
+def _raise_stop(signum: int, frame: FrameType | None) -> None:
+    if signum == getattr(signal, "SIGHUP", None):
+        leave_the_terminal()  # a line printed on the way out would fail: the terminal is gone
+    raise StopSignal(signum)
+
+
+@contextmanager
+def stop_signals_interrupt() -> Iterator[None]:
+    """Within the block, SIGTERM, SIGHUP (unless ignored) and SIGBREAK raise :class:`StopSignal`
+    as SIGINT raises KeyboardInterrupt: a ``kill``, a closed terminal or a batch system's time
+    limit ends a ``biafc`` command the way Ctrl-C does, not by the default action, which left
+    a study's output open for writing (readable only after ``biafc repair``). The previous
+    handlers come back at the end."""
+    old = {s: signal.signal(s, _raise_stop) for s in stop_signals() if s != signal.SIGINT}
+    try:
+        yield
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+
+
+def leave_the_terminal() -> None:
+    """After SIGHUP: the terminal is gone, and a write to it could fail or block the abort. The
+    standard output and error go to the null device from here on; the run's log file
+    (``RUN.log``) and the run file keep the outcome."""
+    try:
+        sys.stdout.flush()
+    except (OSError, ValueError):
+        pass
+    null = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(null, 1)
+        os.dup2(null, 2)
+    finally:
+        os.close(null)

@@ -118,6 +118,7 @@ def run_window(args: argparse.Namespace) -> int:
     from daq.cli.console_close import hold_console_close
     from daq.gui.display_lost import watch_display
     from daq.gui.main_window import MainWindow
+    from daq.gui.stop_signals import close_on_stop_signals
     from daq.logsetup import configure, verbosity
     from protocols.left_open import exit_leaving_them, files_left_open
 
@@ -132,7 +133,9 @@ def run_window(args: argparse.Namespace) -> int:
     win.show()
     hold = hold_console_close(win.console_closed)  # Windows: a closed console aborts the run
     unwatch = watch_display(win.display_lost)  # the display gone (ssh -X): aborts the run
+    unsignal = close_on_stop_signals(win.stop_signal)  # SIGTERM, SIGHUP, Ctrl-C: as Close
     code = int(app.exec()) or int(getattr(win, "exit_status", 0))  # a run aborted by the close
+    unsignal()
     unwatch()
     if hold is not None:
         hold.remove()

@@ -9,6 +9,7 @@ figures run through :class:`BackgroundCall`. The GUI thread only draws.
 from __future__ import annotations
 
 import logging
+import signal
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -109,6 +110,8 @@ class MainWindow(QMainWindow):
         #: the process's exit status: a run aborted by closing the window gives its own (1, or 3
         #: unsafe), as run_protocol would; 0 otherwise
         self.exit_status = 0
+        #: the stop signal that closes the window (:meth:`stop_signal`), or None
+        self._stop_signal: int | None = None
         self.run_path: Path | None = None
         self._dirty = False
         self._busy_connect = False
@@ -822,12 +825,27 @@ class MainWindow(QMainWindow):
         )
         return answer == QMessageBox.StandardButton.Yes
 
+    def stop_signal(self, signum: int) -> None:
+        """SIGTERM, SIGHUP or Ctrl-C (:mod:`daq.gui.stop_signals`): close as Close does, without
+        asking. A run is aborted ("interrupted by SIGTERM") and the process's exit status is the
+        run's (Ctrl-C's 130, as ``run_protocol``'s); with no run, 128 + the signal's number."""
+        self._stop_signal = signum
+        self.log(f"{signal.Signals(signum).name} received: closing the window", "warning")
+        self.close()
+
     def closeEvent(self, event: QCloseEvent) -> None:
+        signum = self._stop_signal
+        if signum is not None and not self.running:
+            self.exit_status = 128 + signum
         if self.running:
-            if not self.confirm_close():
+            if signum is None and not self.confirm_close():
                 event.ignore()
                 return
-            self.abort("window closed during the run")
+            self.abort(
+                "window closed during the run"
+                if signum is None
+                else f"interrupted by {signal.Signals(signum).name}"
+            )
             deadline = time.monotonic() + 60.0
             while self.engine.wait(0.05) is None and time.monotonic() < deadline:
                 QApplication.processEvents()
@@ -837,7 +855,8 @@ class MainWindow(QMainWindow):
             if self.engine.result is not None:  # the window's exit status is the run's
                 from daq.engine.outcome import exit_code
 
-                self.exit_status = int(exit_code(self.engine.result))
+                sigint = signum == signal.SIGINT
+                self.exit_status = int(exit_code(self.engine.result, sigint=sigint))
         self._redraw_timer.stop()
         if self.instruments is not None:
             try:

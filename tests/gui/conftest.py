@@ -155,6 +155,9 @@ class StubWindow:
     def display_lost(self, message: str) -> None:
         pass
 
+    def stop_signal(self, signum: int) -> None:
+        pass
+
 
 def window_args() -> Any:
     """``biafc gui``'s parsed arguments with nothing given."""
@@ -162,3 +165,31 @@ def window_args() -> Any:
 
     return argparse.Namespace(bench=None, protocol=None, run=None, connect=False, verbose=0,
                               quiet=False)  # fmt: skip
+
+
+#: ``python -c`` script: the bench window on the slowed simulated bench (1 s a read), its run
+#: into ``sys.argv[1]`` started at once, through ``daq.gui.app.run_window`` (the process as
+#: ``biafc-gui`` makes it)
+RUN_AT_ONCE_SCRIPT = r"""
+import sys
+from PySide6.QtCore import QTimer
+import daq.gui.main_window as main_window
+from daq.gui import app
+from tests.gui.conftest import SMOKE, make_assembler
+
+out = sys.argv[1]
+Real = main_window.MainWindow
+
+class Window(Real):  # the window with a slow simulated bench, its run started at once
+    def __init__(self, bench, protocol):
+        super().__init__(bench, SMOKE, assembler=make_assembler(read_sleep_s=1.0))
+        self.confirm_close = lambda: True
+        self.run_panel.out_edit.setText(out)
+        self.connected.connect(lambda ok: QTimer.singleShot(0, self.run_panel.start_button.click))
+        QTimer.singleShot(0, self.bench_panel.connect_button.click)
+
+main_window.MainWindow = Window
+ns = app.argparse.Namespace(bench=None, protocol=None, run=None, connect=False, verbose=0,
+                            quiet=False)
+sys.exit(app.run_window(ns))
+"""

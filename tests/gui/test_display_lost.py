@@ -11,7 +11,6 @@ import shutil
 import signal
 import subprocess
 import sys
-import textwrap
 import time
 from pathlib import Path
 from typing import Any
@@ -22,7 +21,7 @@ from PySide6.QtCore import qWarning
 from daq.gui.display_lost import watch_display
 from protocols.runfile import PointState, read_run
 
-from .conftest import running_window
+from .conftest import RUN_AT_ONCE_SCRIPT, running_window
 
 ROOT = Path(__file__).resolve().parents[2]
 BROKE = "The X11 connection broke (error 1). Did the X11 server die?"
@@ -62,31 +61,6 @@ def test_the_window_aborts_its_run_safely_when_the_display_is_lost(
     assert not (tmp_path / "d.h5.lock").exists()
 
 
-_SCRIPT = r"""
-import sys
-from PySide6.QtCore import QTimer
-import daq.gui.main_window as main_window
-from daq.gui import app
-from tests.gui.conftest import SMOKE, make_assembler
-
-out = sys.argv[1]
-Real = main_window.MainWindow
-
-class Window(Real):  # the window with a slow simulated bench, its run started at once
-    def __init__(self, bench, protocol):
-        super().__init__(bench, SMOKE, assembler=make_assembler(read_sleep_s=1.0))
-        self.confirm_close = lambda: True
-        self.run_panel.out_edit.setText(out)
-        self.connected.connect(lambda ok: QTimer.singleShot(0, self.run_panel.start_button.click))
-        QTimer.singleShot(0, self.bench_panel.connect_button.click)
-
-main_window.MainWindow = Window
-ns = app.argparse.Namespace(bench=None, protocol=None, run=None, connect=False, verbose=0,
-                            quiet=False)
-sys.exit(app.run_window(ns))
-"""
-
-
 def _xvfb(display: str) -> subprocess.Popen[bytes] | None:
     """An X server of its own on ``display``, or None where Xvfb or Qt's xcb plugin is
     missing."""
@@ -111,7 +85,7 @@ def test_a_real_display_lost_mid_run_ends_the_run_safely(tmp_path: Path) -> None
         pytest.skip("needs Xvfb and Qt's xcb platform plugin (its X libraries)")
     out = tmp_path / "x.h5"
     env = dict(os.environ, DISPLAY=display, QT_QPA_PLATFORM="xcb", PYTHONPATH=str(ROOT))
-    proc = subprocess.Popen([sys.executable, "-c", textwrap.dedent(_SCRIPT), str(out)], env=env,
+    proc = subprocess.Popen([sys.executable, "-c", RUN_AT_ONCE_SCRIPT, str(out)], env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
     try:
         t_end = time.monotonic() + 60

@@ -84,6 +84,7 @@ class Window:
     def show(self): QTimer.singleShot(0, QApplication.instance().quit)
     def console_closed(self, what): pass
     def display_lost(self, message): pass
+    def stop_signal(self, signum): pass
 
 main_window.MainWindow = Window
 ns = app.argparse.Namespace(bench=None, protocol=None, run=None, connect=False, verbose=0,
