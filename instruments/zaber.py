@@ -45,6 +45,7 @@ from instruments.interfaces import Transport
 __all__ = [
     "FULL_STEP_M",
     "SPEED_UNIT",
+    "Rejected",
     "ZaberReply",
     "ZaberSettings",
     "ZaberStage",
@@ -125,6 +126,14 @@ def parse_reply(line: str) -> ZaberReply:
         m.group(7).strip(),
         int(m.group(3)) if m.group(3) is not None else None,
     )
+
+
+class Rejected(ReplyError):
+    """A command the device answered ``RJ`` (``reason``: the reply's data, e.g. BADDATA)."""
+
+    def __init__(self, message: str, reason: str) -> None:
+        super().__init__(message)
+        self.reason = reason
 
 
 @dataclass(frozen=True)
@@ -268,8 +277,9 @@ class ZaberStage:
             if r.flag == "WR" and text.startswith("move"):
                 raise NotHomedError(f"{self.transport.name}: {cmd!r} rejected: stage not homed")
             flag = "" if r.flag == "--" else f", warning {r.flag} ({_describe(r.flag)})"
-            raise ReplyError(
-                f"{self.transport.name}: {cmd!r} rejected ({r.data or 'no reason given'}{flag})"
+            raise Rejected(
+                f"{self.transport.name}: {cmd!r} rejected ({r.data or 'no reason given'}{flag})",
+                r.data,
             )
         return r
 
@@ -379,6 +389,7 @@ class ZaberStage:
             "microstep_m": step,
             "travel_m": list(travel),
         }
+        self._ensure_speed()  # the device's own range check, before anything moves
         return dict(self._identity)
 
     def identity(self) -> dict[str, Any]:
@@ -438,11 +449,31 @@ class ZaberStage:
         return max(s.home_timeout_s, 1.5 * (hi - lo) / slowest_m_per_s + s.timeout_margin_s)
 
     def _ensure_speed(self) -> None:
+        """``set maxspeed`` to the bench file's speed, once. The device checks its range (the
+        firmware 6 protocol manual, as Zaber's own wrappers copy it: data 1 to resolution x
+        16384, 10,000 full steps/s, 30.48 mm/s on an X-LSM at any resolution; firmware 7's range
+        was not found): a
+        refusal is a :class:`LimitError` naming the bench field, at connect, not at the first
+        move minutes into a run."""
         if not self._speed_set:
             s = self.settings
             data = round(float(s.speed_m_per_s) / self.microstep_m * SPEED_UNIT)
-            self.command(f"set maxspeed {data}")
+            try:
+                self.command(f"set maxspeed {data}")
+            except Rejected as exc:
+                raise LimitError(
+                    f"{self.transport.name}: stage.speed {s.speed_m_per_s * 1e3:.4g} mm/s in the "
+                    f"bench file: the device refused 'set maxspeed {data}' "
+                    f"({exc.reason or 'no reason given'}); the protocol manual's range ends at "
+                    f"{self._max_speed_m_per_s() * 1e3:.4g} mm/s"
+                ) from None
             self._speed_set = True
+
+    def _max_speed_m_per_s(self) -> float:
+        """The protocol manual's ceiling of ``maxspeed`` in m/s at the resolution read at
+        connect (data resolution x 16384)."""
+        resolution = (self._identity or {}).get("resolution", self.settings.resolution)
+        return int(resolution) * 16384 / SPEED_UNIT * self.microstep_m
 
     def speed(self) -> float:
         """Current ``maxspeed`` in m/s."""

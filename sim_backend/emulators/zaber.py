@@ -242,7 +242,7 @@ class ZaberEmulator:
                 value = int(words[2])
             except ValueError:
                 return self._reply(False, "BADDATA")
-            if value <= 0:
+            if not 1 <= value <= self.resolution * 16384:  # the manual's range of maxspeed
                 return self._reply(False, "BADDATA")
             self.maxspeed = value
             return self._reply(True, "0")
