@@ -331,6 +331,11 @@ class Protocol(_Model):
                     f"{{{shown}}} is not allowed in the output pattern; use only {{name}}, "
                     "{timestamp} and {date}, with no attribute, index, conversion or format"
                 )
+        if not v.lower().endswith(".h5"):
+            raise ValueError(
+                f"the output pattern {v!r} must end in .h5 (a run's log is written beside it "
+                "as NAME.log)"
+            )
         return v
 
     @field_validator("amplitudes", mode="before")

@@ -97,6 +97,11 @@ def check_output_path(path: Path, *, resume: bool = False) -> None:
         return
     if path.is_dir():
         raise StoreError(f"--out: {path} is a folder; give a run file name (e.g. {path}/run.h5)")
+    if path.suffix.lower() != ".h5":  # RUN.h5's log is RUN.log: 'a.x' and 'a.y' shared a.log
+        raise StoreError(
+            f"--out: {path}: a run file's name ends in .h5 (its log is written beside it as "
+            f"NAME.log); e.g. --out {path.with_name(path.name + '.h5')}"
+        )
     if path.exists():
         status = _run_status(path)
         if status is None:

@@ -235,6 +235,11 @@ CASES: tuple[Case, ...] = (
        ("proto.yaml", "settle")),
     Case("out_proc", "--out /proc/x.h5", ("run_protocol", "proto.yaml", "--out", "/proc/x.h5"),
          ("/proc/x.h5",), {"proto.yaml": SMOKE}),
+    Case("out_not_h5", "--out run.log (before: the run's log took the name, exit 1; 'ltr.a' and "
+         "'ltr.b' shared ltr.log)", ("run_protocol", "proto.yaml", "--out", "run.log"),
+         ("--out", "run.log", "ends in .h5"), {"proto.yaml": SMOKE}),
+    _p("pattern_not_h5", "output pattern not ending in .h5", 'output: "runs/{name}_{timestamp}.h5"',
+       'output: "runs/{name}_{timestamp}"', ("proto.yaml", "output", "must end in .h5")),
     # -- bench fields (the validation layer) -------------------------------------------------
     _b("velocity_range_0", "daq velocity_range: 0 V", "velocity_range: 10 V",
        "velocity_range: 0 V", ("bench.yaml", "velocity_range")),

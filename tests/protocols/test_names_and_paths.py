@@ -34,3 +34,21 @@ def test_output_pattern_takes_only_the_known_fields(pattern: str) -> None:
 def test_plain_pattern_and_name_still_work() -> None:
     pf = parse_protocol(SMOKE.replace(PATTERN, 'output: "runs/{name}_{date}.h5"'))
     assert pf.protocol.output_path().name.startswith("smoke_")
+
+
+def test_an_output_pattern_not_ending_in_h5_is_refused() -> None:
+    """A run's log is RUN.log beside RUN.h5: runs named 'ltr.a' and 'ltr.b' shared 'ltr.log',
+    and a run named 'x.log' found its own log in its place and failed (exit 1)."""
+    with pytest.raises(ConfigError, match=r":\d+: output: .*must end in \.h5"):
+        parse_protocol(SMOKE.replace(PATTERN, 'output: "runs/{name}_{timestamp}.log"'))
+
+
+@pytest.mark.parametrize("name", ["x.log", "ltr.a", "ltr"])
+def test_a_run_file_not_named_h5_is_refused_before_anything_is_written(
+    tmp_path: Path, name: str
+) -> None:
+    from daq.request import RequestError, validate_request
+
+    with pytest.raises(RequestError, match=r"--out: .*a run file's name ends in \.h5"):
+        validate_request("smoke", out=tmp_path / name)
+    assert list(tmp_path.iterdir()) == []
