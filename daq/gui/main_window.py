@@ -211,11 +211,13 @@ class MainWindow(QMainWindow):
         m.addAction(quit_act)
 
     # -- helpers ---------------------------------------------------------------------------
-    def log(self, message: str, level: str = "info") -> None:
+    def log(self, message: str, level: str = "info", *, record: bool = True) -> None:
         """A line in the window's log, and a ``biafc.gui`` record (terminal with ``-v``, the log
-        file beside the run file while a run is on: :mod:`daq.logsetup`)."""
+        file beside the run file while a run is on: :mod:`daq.logsetup`); ``record=False``: the
+        window only, for what the engine has recorded itself (its warnings, its status)."""
         levels = {"warning": logging.WARNING, "error": logging.ERROR}
-        logging.getLogger("biafc.gui").log(levels.get(level, logging.INFO), message)
+        if record:
+            logging.getLogger("biafc.gui").log(levels.get(level, logging.INFO), message)
         message = in_window_words(message)  # the window's controls, not run_protocol's flags
         self.log_view.add(message, level)
         if level != "info":
@@ -662,25 +664,22 @@ class MainWindow(QMainWindow):
                 self._dirty = True
             elif k == EventKind.PROGRESS:
                 self.run_panel.show_progress(d)
+            # the engine records its own events in the run's log and file: shown here only
             elif k == EventKind.STATE_CHANGED:
                 self.run_panel.set_state(str(d["state"]))
-                self.log(f"run {d['state']}")
+                self.log(f"run {d['state']}", record=False)
             elif k == EventKind.RUN_STARTED:
                 self.log(
                     f"run {shown_path(d['path'])}: {d['n_todo']} of {d['n_points']} points to "
                     "measure "
-                    f"(estimated {format_duration(d['estimated_s'])})"
+                    f"(estimated {format_duration(d['estimated_s'])})",
+                    record=False,
                 )
-            elif k == EventKind.POINT_FAILED:
-                self.log(
-                    f"point {d['direction']} cyl {d['cylinder']} failed: {d.get('reason', '')}",
-                    "warning",
-                )
-            elif k == EventKind.WARNING:
-                self.log(ev.message, str(d.get("level", "warning")))
+            elif k == EventKind.WARNING:  # a failed point's line too (POINT_FAILED repeats it)
+                self.log(ev.message, str(d.get("level", "warning")), record=False)
             elif k == EventKind.STATUS:
                 self.run_panel.where_label.setText(str(d["text"]))
-                self.log(str(d["text"]))
+                self.log(str(d["text"]), record=False)
             elif k == EventKind.FINISHED:
                 self._finished(d)
 

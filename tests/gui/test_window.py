@@ -67,6 +67,11 @@ def test_smoke_run_to_completion(
     log = (tmp_path / "run.log").read_text()
     assert "biafc.gui: starting run" in log and "biafc.run: run started" in log
     assert "complete: 6 points" in log
+    # each line once: the window does not record again what the engine recorded (before:
+    # "homing the stage" and "run complete" from biafc.run and again from biafc.gui)
+    said = [line.split(": ", 1)[1] for line in log.splitlines() if ": " in line]
+    assert said.count("homing the stage") == 1
+    assert not {m for m in said if said.count(m) > 1}, log
     # the window kept turning
     assert longest < MAX_STALL_MS, f"event loop stalled {longest:.0f} ms"
     print(f"longest event-loop stall during the smoke run: {longest:.1f} ms")
