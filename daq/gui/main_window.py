@@ -112,6 +112,7 @@ class MainWindow(QMainWindow):
         self.exit_status = 0
         #: the stop signal that closes the window (:meth:`stop_signal`), or None
         self._stop_signal: int | None = None
+        self._closing = False  # a close is waiting for the run's safe state
         self.run_path: Path | None = None
         self._dirty = False
         self._busy_connect = False
@@ -828,8 +829,12 @@ class MainWindow(QMainWindow):
         """SIGTERM, SIGHUP or Ctrl-C (:mod:`daq.gui.stop_signals`): close as Close does, without
         asking. A run is aborted ("interrupted by SIGTERM") and the process's exit status is the
         run's (Ctrl-C's 130, as ``run_protocol``'s); with no run, 128 + the signal's number."""
+        name = signal.Signals(signum).name
+        if self._closing:  # a second one: the close under way waits for the safe state
+            self.log(f"{name} received: still closing, waiting for the safe state", "warning")
+            return
         self._stop_signal = signum
-        self.log(f"{signal.Signals(signum).name} received: closing the window", "warning")
+        self.log(f"{name} received: closing the window", "warning")
         self.close()
 
     def closeEvent(self, event: QCloseEvent) -> None:
@@ -840,22 +845,30 @@ class MainWindow(QMainWindow):
             if signum is None and not self.confirm_close():
                 event.ignore()
                 return
+            self._closing = True
             self.abort(
                 "window closed during the run"
                 if signum is None
                 else f"interrupted by {signal.Signals(signum).name}"
             )
-            deadline = time.monotonic() + 60.0
+            deadline = time.monotonic() + CLOSE_WAIT_S
             while self.engine.wait(0.05) is None and time.monotonic() < deadline:
                 QApplication.processEvents()
             QApplication.processEvents()
             if self.adapter is not None:
                 self._on_events()
-            if self.engine.result is not None:  # the window's exit status is the run's
-                from daq.engine.outcome import exit_code
+            from daq.engine.outcome import ExitCode, exit_code
 
+            if self.engine.result is not None:  # the window's exit status is the run's
                 sigint = signum == signal.SIGINT
                 self.exit_status = int(exit_code(self.engine.result, sigint=sigint))
+            else:  # the run did not end: nothing confirmed its safe state
+                self.log(
+                    f"the run did not end within {CLOSE_WAIT_S:g} s of the abort: its safe state "
+                    "is not confirmed; switch the generator's outputs off by hand",
+                    "error",
+                )
+                self.exit_status = int(ExitCode.UNSAFE)
         self._redraw_timer.stop()
         if self.instruments is not None:
             try:
@@ -864,6 +877,10 @@ class MainWindow(QMainWindow):
                 pass
             self.instruments = None
         event.accept()
+
+
+#: how long closing the window waits for an aborted run's safe state and file (s)
+CLOSE_WAIT_S = 60.0
 
 
 def _protocol_fields(proto: Any, plan: Any) -> dict[str, str]:

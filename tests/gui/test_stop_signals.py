@@ -13,12 +13,13 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import pytest
 
 from protocols.runfile import PointState, read_run
 
-from .conftest import RUN_AT_ONCE_SCRIPT
+from .conftest import RUN_AT_ONCE_SCRIPT, running_window
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -100,3 +101,34 @@ def test_sigterm_with_no_run_closes_the_window_at_once(tmp_path: Path) -> None:
         proc.kill()
     assert rc == 128 + signal.SIGTERM
     assert took < 10
+
+
+def test_a_second_signal_while_closing_waits_for_the_same_safe_state(
+    qtbot: Any, tmp_path: Path
+) -> None:
+    from PySide6.QtCore import QTimer
+
+    win = running_window(qtbot, tmp_path / "twice.h5", read_sleep_s=0.5)
+    QTimer.singleShot(50, lambda: win.stop_signal(signal.SIGTERM))  # during the first's wait
+    win.stop_signal(signal.SIGTERM)
+    assert win.exit_status == 1
+    assert read_run(tmp_path / "twice.h5").status == "aborted"
+    shown = "\n".join(win.log_view.lines)
+    assert "SIGTERM received: still closing, waiting for the safe state" in shown
+    assert shown.count("SIGTERM received: closing the window") == 1
+
+
+def test_a_run_that_does_not_end_after_the_abort_is_not_called_safe(
+    qtbot: Any, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Closing waits a bounded time for the aborted run; before, a run still going at the end
+    of the wait closed the window with exit status 0, as if all were well."""
+    import daq.gui.main_window as main_window
+
+    win = running_window(qtbot, tmp_path / "slow.h5", read_sleep_s=3.0)
+    monkeypatch.setattr(main_window, "CLOSE_WAIT_S", 0.2)
+    engine = win.engine
+    win.stop_signal(signal.SIGTERM)
+    assert win.exit_status == 3  # unsafe: nothing confirmed the outputs off
+    assert "its safe state is not confirmed" in "\n".join(win.log_view.lines)
+    assert engine.wait(30) is not None  # the run does end, later
