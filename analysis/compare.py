@@ -50,6 +50,8 @@ CLIP_FRACTION = 0.995
 MIN_PRETRIGGER = 20
 
 STATES = ("ok", "pending", "failed", "clipped")
+#: the state of a cylinder the run's protocol does not scan (no point of it, pending or not)
+UNSCANNED = "unscanned"
 
 
 def point_states(
@@ -83,20 +85,30 @@ class DirectionComparison:
     predicted_sweep: AmplitudeSweep
 
     def state_of(self, cylinder: int) -> NDArray[np.str_]:
-        """``[A]`` state of cylinder ``cylinder`` (1-based); ``pending`` when not scanned."""
+        """``[A]`` state of cylinder ``cylinder`` (1-based); ``unscanned`` when it is not in the
+        run's protocol (it was called ``pending``, "not measured yet", before)."""
         hits = np.nonzero(self.cylinders == cylinder)[0]
         if not hits.size:
-            return np.full(self.state.shape[0], "pending", dtype="<U8")
-        return self.state[:, hits[0]]
+            return np.full(self.state.shape[0], UNSCANNED, dtype="<U9")
+        return self.state[:, hits[0]].astype("<U9")
 
     def sweep_state(self) -> NDArray[np.str_]:
         """``[A]`` the worse state of the entry and far points (what the sweep relies on)."""
         ms = self.measured_sweep
         entry, far = self.state_of(ms.entry), self.state_of(ms.far)
         out = far.copy()
-        for st in ("pending", "clipped", "failed"):
+        for st in ("pending", "clipped", "failed", UNSCANNED):
             out[(entry == st) | (far == st)] = st
         return out
+
+    def far_scanned(self) -> bool:
+        """Whether the far cylinder is in the run's protocol (its spectra can be compared)."""
+        return bool(np.any(self.cylinders == self.measured_sweep.far))
+
+    def sweep_scanned(self) -> bool:
+        """Whether the entry and far cylinders are both in the run's protocol (the sweep's
+        transmission and far-end peak can be compared)."""
+        return self.far_scanned() and bool(np.any(self.cylinders == self.measured_sweep.entry))
 
 
 @dataclass(frozen=True)

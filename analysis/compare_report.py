@@ -50,6 +50,8 @@ class CompareReport:
     predicted: RunData
     model_s: float
     files: dict[str, list[Path]] = field(default_factory=dict)
+    #: figures not drawn, and why (name -> reason)
+    not_drawn: dict[str, str] = field(default_factory=dict)
     json_path: Path | None = None
     csv_path: Path | None = None
     #: the run file's status (``complete``, ``aborted``, ...) and the model's solver
@@ -147,10 +149,20 @@ def _write(report: CompareReport, run: RunData, out: Path) -> None:
             )
             name = f"compare_spatial_{d}_{'low' if k == 0 and len(amps) > 1 else 'high'}"
             report.files[name] = save_figure(fig, out, name)
-        report.files[f"compare_spectra_{d}"] = save_figure(
-            plot_compare_spectra(dc), out, f"compare_spectra_{d}"
+        if dc.far_scanned():
+            report.files[f"compare_spectra_{d}"] = save_figure(
+                plot_compare_spectra(dc), out, f"compare_spectra_{d}"
+            )
+        else:  # before: empty panels titled "(pending)" for a cylinder no point was planned on
+            report.not_drawn[f"compare_spectra_{d}"] = (
+                f"the far cylinder #{dc.measured_sweep.far} is not in the run's protocol"
+            )
+    if any(dc.sweep_scanned() for dc in cmp.directions.values()):
+        report.files["compare_sweep"] = save_figure(plot_compare_sweep(cmp), out, "compare_sweep")
+    else:
+        report.not_drawn["compare_sweep"] = (
+            "no direction has its entry and far cylinders in the run's protocol"
         )
-    report.files["compare_sweep"] = save_figure(plot_compare_sweep(cmp), out, "compare_sweep")
     report.files["compare_residuals"] = save_figure(
         plot_compare_residuals(cmp), out, "compare_residuals"
     )

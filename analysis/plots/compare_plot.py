@@ -155,7 +155,7 @@ def plot_compare_sweep(cmp: Comparison) -> Figure:
             ax_f.plot(
                 x[good], ms.output_Hz[good] / 1e3, "o", color=colour, label=f"{d.upper()} measured"
             )
-            for name, (marker, mc) in BAD_MARK.items():
+            for name, (marker, mc) in BAD_MARK.items():  # unscanned: nothing to mark
                 sel = st == name
                 if np.any(sel):
                     yt = np.where(np.isfinite(ms.transmission[sel]), ms.transmission[sel], np.nan)

@@ -69,6 +69,8 @@ def run(args: argparse.Namespace) -> int:
     print(report.text())
     for name, paths in report.files.items():
         print(f"written {name}: {', '.join(str(p) for p in paths)}")
+    for name, why in report.not_drawn.items():
+        print(f"not drawn {name}: {why}")
     print(f"written {report.csv_path}")
     print(f"written {report.json_path}")
     return 0

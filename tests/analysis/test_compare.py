@@ -155,3 +155,26 @@ def test_the_figures_say_what_they_scale_to_and_draw_one_amplitudes_model(scan: 
     lines = [ln for ax in plot_compare_sweep(cmp).axes for ln in ax.get_lines()]
     model = [ln for ln in lines if str(ln.get_label()).endswith("model")]
     assert model and all(ln.get_marker() not in ("None", "", None) for ln in model)
+
+
+def test_a_far_cylinder_outside_the_protocol_is_unscanned_and_not_drawn(
+    tmp_path: Path,
+) -> None:
+    """Before, a run whose protocol stops short of the far cylinder (smoke: 1, 8, 16) drew
+    empty spectra panels titled '(pending)', a sweep of nothing, and legend entries 'pending'
+    for a cylinder no point had been planned on."""
+    path = write_synthetic_scan(
+        tmp_path / "short.h5",
+        true_spec=default_chain_spec(),
+        amplitudes_m=(20e-9, 2e-6),
+        cylinders=(1, 8, 16),
+        duration_s=8e-3,
+    )
+    report = compare_run(read_run(path), tmp_path / "out")
+    dc = report.comparison.directions["ltr"]
+    assert list(dc.state_of(31)) == ["unscanned", "unscanned"]
+    assert list(dc.state_of(1)) == ["ok", "ok"]
+    assert not dc.far_scanned() and not dc.sweep_scanned()
+    assert "compare_spectra_ltr" not in report.files and "compare_sweep" not in report.files
+    assert "#31 is not in the run's protocol" in report.not_drawn["compare_spectra_ltr"]
+    assert "compare_residuals" in report.files  # what can be compared still is
