@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
 
 import pytest
 
@@ -36,3 +37,17 @@ def _no_file_left_open_across_tests(monkeypatch: pytest.MonkeyPatch) -> None:
     from protocols import left_open
 
     monkeypatch.setattr(left_open, "_LEFT", [])
+
+
+@pytest.fixture(autouse=True)
+def _no_terminal_log_handler_across_tests() -> Iterator[None]:
+    """An in-process CLI installs ``biafc``'s terminal handler on the ``sys.stderr`` of its
+    test (pytest's capture, closed after it); a later test's log record then failed with
+    "--- Logging error --- ValueError: I/O operation on closed file". Each test leaves none."""
+    import logging
+
+    yield
+    logger = logging.getLogger("biafc")
+    for h in list(logger.handlers):
+        if getattr(h, "_biafc_terminal", False):
+            logger.removeHandler(h)
