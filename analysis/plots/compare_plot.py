@@ -104,7 +104,8 @@ def plot_compare_spectra(dc: DirectionComparison) -> Figure:
     colour = DIRECTION_COLOURS.get(dc.direction, "k")
     far_state = dc.state_of(ms.far)
     with style():
-        fig, axs = new_figure(rows, cols, figsize=(3.2 * cols, 2.6 * rows))
+        # at least two panels wide: the title of one amplitude's figure was cut at both ends
+        fig, axs = new_figure(rows, cols, figsize=(3.2 * max(cols, 2), 2.6 * rows))
         for a in range(rows * cols):
             ax: Axes = axs[a // cols, a % cols]
             if a >= n:

@@ -8,6 +8,7 @@ from matplotlib.figure import Figure
 from analysis.bands import linear_limit_cylinder
 from analysis.plots.quasi_bands import DIRECTION_COLOURS
 from analysis.plots.style import (
+    DARK_EDGE,
     add_gap_background,
     cell_edges,
     gap_legend_handle,
@@ -73,7 +74,8 @@ def plot_spatial_frequency(
         )
         limit = linear_limit_cylinder(f_in_Hz, direction, onset_Hz, cutoff_Hz)
         if limit is not None:
-            ax.axvline(limit, color="white", ls="--", lw=1.2, label=f"linear limit #{limit}")
+            ax.axvline(limit, color="white", ls="--", lw=1.2, label=f"linear limit #{limit}",
+                       path_effects=DARK_EDGE)  # fmt: skip
         ax.set_ylim(f_khz[0], f_khz[-1])
         ax.set_xlim(0.5, max(n, int(smap.cylinders.max())) + 0.5)
         ax.set_xlabel("cylinder number")

@@ -6,7 +6,14 @@ from collections.abc import Sequence
 
 from matplotlib.figure import Figure
 
-from analysis.plots.style import add_gap_background, cell_edges, masked_cmap, new_figure, style
+from analysis.plots.style import (
+    DARK_EDGE,
+    add_gap_background,
+    cell_edges,
+    masked_cmap,
+    new_figure,
+    style,
+)
 from analysis.spatiotemporal import SpatiotemporalMap
 from analysis.spectra import spectrum_db
 
@@ -38,8 +45,9 @@ def plot_spatiotemporal(
             )
             if linear_limit is not None:
                 ax.axvline(
-                    linear_limit, color="w", ls=":", lw=1.5, label=f"linear limit #{linear_limit}"
-                )
+                    linear_limit, color="w", ls=":", lw=1.5, label=f"linear limit #{linear_limit}",
+                    path_effects=DARK_EDGE,
+                )  # fmt: skip
                 ax.legend(loc="upper right", fontsize=8)
             ax.set_xlabel("cylinder number")
             ax.set_title(label)

@@ -13,6 +13,7 @@ from typing import Any, cast
 
 import matplotlib
 import numpy as np
+from matplotlib import patheffects
 from matplotlib.axes import Axes
 from matplotlib.colors import Colormap
 from matplotlib.figure import Figure
@@ -22,6 +23,7 @@ from numpy.typing import NDArray
 from analysis.display import amplitude_label, amplitude_scale
 
 __all__ = [
+    "DARK_EDGE",
     "FORMATS",
     "GAP_LABEL",
     "RC",
@@ -38,6 +40,9 @@ __all__ = [
 
 #: formats every figure is written in
 FORMATS: tuple[str, ...] = ("png", "pdf")
+#: path effects for a white line on a dark map: a dark edge keeps it (and its legend sample,
+#: on the legend's light frame, where it was invisible) visible on either background
+DARK_EDGE = [patheffects.withStroke(linewidth=2.6, foreground="0.15")]
 #: legend text of the hatched "not measured" background
 GAP_LABEL = "failed or not measured"  # both leave NaN: a failed point is not "not measured"
 

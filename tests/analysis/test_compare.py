@@ -155,6 +155,13 @@ def test_the_figures_say_what_they_scale_to_and_draw_one_amplitudes_model(scan: 
     lines = [ln for ax in plot_compare_sweep(cmp).axes for ln in ax.get_lines()]
     model = [ln for ln in lines if str(ln.get_label()).endswith("model")]
     assert model and all(ln.get_marker() not in ("None", "", None) for ln in model)
+    # one amplitude's far-end spectra: the title fits the figure (it was cut at both ends)
+    from analysis.plots.compare_plot import plot_compare_spectra
+
+    fig = plot_compare_spectra(cmp.directions["ltr"])
+    fig.canvas.draw()
+    title = fig._suptitle.get_window_extent()  # type: ignore[union-attr]
+    assert title.x0 >= 0 and title.x1 <= fig.bbox.x1
 
 
 def test_a_far_cylinder_outside_the_protocol_is_unscanned_and_not_drawn(
