@@ -431,22 +431,29 @@ class ZaberStage:
         self._must_home = False
         self._ensure_speed()
 
-    def home_timeout_s(self) -> float:
-        """How long homing may take (s): the whole travel at the speed the device homes at,
-        the lesser of ``maxspeed`` and ``limit.approach.maxspeed`` (the protocol manual), x 1.5
-        plus the margin; at least ``home_timeout_s`` (also when the device has no such
-        settings)."""
-        s = self.settings
+    def home_time_s(self) -> float | None:
+        """The longest homing (s): the whole travel at the speed the device homes at, the
+        lesser of ``maxspeed`` and ``limit.approach.maxspeed`` (the protocol manual); None when
+        the device has no such settings."""
         try:
             rates = [self._get_int("maxspeed"), self._get_int("limit.approach.maxspeed")]
         except ReplyError:
-            return s.home_timeout_s
+            return None
         positive = [r for r in rates if r > 0]
         if not positive or self._device_limits_m is None:
-            return s.home_timeout_s
+            return None
         slowest_m_per_s = min(positive) / SPEED_UNIT * self.microstep_m
         lo, hi = self._device_limits_m
-        return max(s.home_timeout_s, 1.5 * (hi - lo) / slowest_m_per_s + s.timeout_margin_s)
+        return (hi - lo) / slowest_m_per_s
+
+    def home_timeout_s(self) -> float:
+        """How long homing may take (s): :meth:`home_time_s` x 1.5 plus the margin; at least
+        ``home_timeout_s`` (also when the device has no homing speed settings)."""
+        s = self.settings
+        longest = self.home_time_s()
+        if longest is None:
+            return s.home_timeout_s
+        return max(s.home_timeout_s, 1.5 * longest + s.timeout_margin_s)
 
     def _ensure_speed(self) -> None:
         """``set maxspeed`` to the bench file's speed, once. The device checks its range (the

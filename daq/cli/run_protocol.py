@@ -128,6 +128,11 @@ class Progress:
             amp = _fmt_amplitude(float(d["amplitude"]), str(d["amplitude_units"]))
             where = f"{d['direction']} {amp} cyl {d['cylinder']:2d}"
             self.display.update(int(d["done"]), detail=where, eta_s=float(d["eta_s"]))
+        elif k == EventKind.STATUS:  # homing: minutes on the rig, before the first point
+            if self.display is not None:
+                self.display.note(str(d["text"]))
+            else:
+                print(str(d["text"]), file=self.stream, flush=True)
         elif k == EventKind.WARNING:
             text = f"warning: {event.message}"
             if self.display is not None:

@@ -81,6 +81,20 @@ def _held_text(snapshot: dict[str, Any], channel: int) -> str:
         return ""
 
 
+def _homing_time(stage: Any) -> str:
+    """``" (at most 2 min 30 s)"``: the longest homing the stage reports
+    (``home_time_s``: the whole travel at its homing speed), or "" when it reports none."""
+    ask = getattr(stage, "home_time_s", None)
+    try:
+        longest = ask() if callable(ask) else None
+    except InstrumentError:
+        return ""
+    if longest is None or not longest > 0:
+        return ""
+    minutes, seconds = divmod(round(longest), 60)
+    return f" (at most {minutes} min {seconds} s)" if minutes else f" (at most {seconds} s)"
+
+
 def _jsonable(obj: Any) -> Any:
     """A JSON-ready copy of a settings object (dataclasses, pydantic models, arrays)."""
     import dataclasses
@@ -554,8 +568,9 @@ class RunEngine:
         for ch in sorted(set(bench.direction_channel.values())):
             inst.generator.output(ch, False)
         if not inst.stage.is_homed():
-            self._log("info", "homing the stage")
-            self._emit(EventKind.STATUS, "homing the stage", text="homing the stage")
+            text = "homing the stage" + _homing_time(inst.stage)
+            self._log("info", text)
+            self._emit(EventKind.STATUS, text, text=text)
             inst.stage.home(cancel=self._abort)  # an abort stops the axis, not waits for it
             if self._abort.is_set():
                 raise _Aborted()

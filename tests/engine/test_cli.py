@@ -376,3 +376,17 @@ def test_out_under_a_file_names_it(proto_file, tmp_path, capsys, no_instruments)
     blocker.write_text("")
     err = _main_err([str(proto_file), "--out", str(blocker / "run.h5")], capsys)
     assert f"{blocker} is a file, not a folder" in err
+
+
+def test_homing_is_said_with_its_longest_time_before_the_first_point(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """On the rig homing takes minutes before the first point, and the terminal said nothing
+    (the window showed it, the command line did not print the status). The stage's travel at
+    its homing speed bounds it: 500 mm at 25 mm/s on the simulated bench."""
+    assert rp.main(["smoke", "--out", str(tmp_path / "h.h5")]) == 0
+    text = capsys.readouterr().out
+    first = text.splitlines()[0]
+    assert first == "homing the stage (at most 20 s)", text
+    log = (tmp_path / "h.log").read_text(encoding="utf-8")
+    assert "biafc.run: homing the stage (at most 20 s)" in log
