@@ -54,9 +54,14 @@ def coerce_sample_rate(requested_Hz: float, max_rate_Hz: float, timebase_Hz: flo
 def on_grid(
     src_time_s: NDArray[np.float64], values: NDArray[np.float64], dst_time_s: NDArray[np.float64]
 ) -> NDArray[np.float64]:
-    """Linear interpolation of ``values [S_src]`` (or ``[R, S_src]``) from ``src_time_s [S_src]``
-    onto ``dst_time_s [S]``; zero outside the source window (the chain is at rest before the
-    trigger). Exact copy when the grids coincide."""
+    """``values [S_src]`` (or ``[R, S_src]``) on a uniform ``src_time_s [S_src]`` taken onto
+    ``dst_time_s [S]``; zero outside the source window (the chain is at rest before the
+    trigger). Exact copy when the grids coincide; otherwise four-point (cubic) Lagrange
+    interpolation, linear in the first and last interval. Linear interpolation throughout
+    low-passed the record: the decoder's 7.3 us delay, a fraction of a sample, took 1.0 % off an
+    8.92 kHz burst at 200 kS/s and 0.14 % at 500 kS/s (0.014 % and 0.0003 % now), which
+    ``biafc calibrate`` read as a stroke 22 sigma low. A source grid that is not uniform is
+    interpolated linearly."""
     src = np.asarray(src_time_s, dtype=np.float64)
     dst = np.asarray(dst_time_s, dtype=np.float64)
     vals = np.asarray(values, dtype=np.float64)
@@ -72,9 +77,38 @@ def on_grid(
             if hi > lo:
                 out[..., lo:hi] = vals[..., lo + k0 : hi + k0]
             return out
+        uniform = src.shape[0] >= 4 and bool(np.all(np.abs(np.diff(src) - dt) <= 1e-9 * abs(dt)))
+        if uniform:
+            return _lagrange4(vals, (dst - src[0]) / dt)
     if vals.ndim == 1:
         return np.interp(dst, src, vals, left=0.0, right=0.0)
     return np.stack([np.interp(dst, src, row, left=0.0, right=0.0) for row in vals])
+
+
+def _lagrange4(vals: NDArray[np.float64], x: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``vals [..., S_src]`` at fractional sample positions ``x [S]``: cubic Lagrange on the four
+    samples around each point, linear in the first and last interval, zero outside
+    ``[0, S_src - 1]``."""
+    n = vals.shape[-1]
+    out = np.zeros(vals.shape[:-1] + x.shape, dtype=np.float64)
+    inside = (x >= 0.0) & (x <= n - 1)
+    k = np.minimum(np.floor(np.where(inside, x, 0.0)).astype(np.int64), n - 2)
+    tau = np.where(inside, x, 0.0) - k
+    cubic = inside & (k >= 1) & (k <= n - 3)
+    linear = inside & ~cubic
+    if np.any(linear):
+        kl, tl = k[linear], tau[linear]
+        out[..., linear] = (1.0 - tl) * vals[..., kl] + tl * vals[..., kl + 1]
+    if np.any(cubic):
+        kc, t = k[cubic], tau[cubic]
+        w = (
+            -t * (t - 1.0) * (t - 2.0) / 6.0,
+            (t + 1.0) * (t - 1.0) * (t - 2.0) / 2.0,
+            -(t + 1.0) * t * (t - 2.0) / 2.0,
+            (t + 1.0) * t * (t - 1.0) / 6.0,
+        )
+        out[..., cubic] = sum(wj * vals[..., kc + j - 1] for j, wj in enumerate(w))
+    return out
 
 
 def decoder_output(

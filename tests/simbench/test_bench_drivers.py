@@ -30,6 +30,8 @@ from instruments.interfaces import (
 from sim_backend import dem
 from sim_backend.simbench import SimWorld, SimWorldConfig
 
+from .conftest import delayed
+
 RATE = 200e3
 ACQ = AcquisitionConfig(sample_rate_Hz=RATE, n_samples=6100, n_pretrigger=100)
 F_IN = {"ltr": 8.92e3, "rtl": 6.63e3}
@@ -104,7 +106,9 @@ def test_cylinder_31_through_the_drivers_equals_the_dem(rig: SimRig) -> None:
         waveform=(samples, (samples.size - 1) / shape.duration_s),  # the burst's own carrier
     )
     res = dem.simulate(chain, [drive], duration_s=0.03, sample_rate_Hz=RATE)
-    expected = np.interp(acq.time_s - delay, res.time_s, res.velocity[0, 30], left=0, right=0)
+    # between the DEM's samples by scipy's cubic spline: linear interpolation takes 0.14 % off
+    # the burst at 500 kS/s, more than the noise at this amplitude
+    expected = delayed(res.time_s, res.velocity[0, 30], acq.time_s - delay)
     cfg = rig.world.config
     noise = np.sqrt(
         cfg.vibrometer_noise_m_per_s_rms**2

@@ -12,6 +12,8 @@ from instruments.interfaces import Acquisition, AcquisitionConfig
 from sim_backend import dem
 from sim_backend.simbench import ChannelPlay, SimWorld, SimWorldConfig
 
+from .conftest import delayed
+
 RATE = 200e3
 ACQ = AcquisitionConfig(sample_rate_Hz=RATE, n_samples=6100, n_pretrigger=100)
 F_IN = {"ltr": 8.92e3, "rtl": 6.63e3}
@@ -57,7 +59,9 @@ def test_record_of_cylinder_31_is_the_dem_velocity_within_noise(world: SimWorld)
     )
     res = dem.simulate(chain, [drive], duration_s=0.03, sample_rate_Hz=RATE)
     delay_s = world._inst.vibrometer.delay_s  # the decoder delays the analog output
-    expected = np.interp(acq.time_s - delay_s, res.time_s, res.velocity[0, 30], left=0.0, right=0.0)
+    # between the DEM's samples by scipy's cubic spline: linear interpolation takes 0.14 % off
+    # the burst at 500 kS/s, more than the noise at this amplitude
+    expected = delayed(res.time_s, res.velocity[0, 30], acq.time_s - delay_s)
     cfg = world.config
     lsb_V = 2 * 10.0 / 2**cfg.adc_bits
     noise = np.sqrt(

@@ -156,6 +156,20 @@ def test_on_grid_copies_on_matching_grid_and_zero_pads() -> None:
     assert half.tolist() == pytest.approx([0.5, 1.5])
 
 
+def test_on_grid_keeps_the_bursts_amplitude_across_a_fraction_of_a_sample() -> None:
+    """The decoder's 7.3 us delay puts the record between the DEM's samples; linear
+    interpolation took 1.0 % off an 8.92 kHz burst at 200 kS/s (0.14 % at 500 kS/s)."""
+    for rate, most in ((200e3, 2e-4), (500e3, 1e-5)):
+        t = np.arange(int(0.02 * rate)) / rate
+
+        def burst(t: np.ndarray) -> np.ndarray:
+            return np.exp(-(((t - 0.01) / 0.003) ** 2) / 2) * np.sin(2 * np.pi * 8920.0 * t)
+
+        got = on_grid(t, burst(t), t - 7.3e-6)
+        exact = burst(t - 7.3e-6)
+        assert abs(np.linalg.norm(got) / np.linalg.norm(exact) - 1) < most, rate
+
+
 # --- the world and its digitiser ------------------------------------------------------------
 def test_sim_digitiser_is_a_digitiser() -> None:
     assert isinstance(make_world().digitiser(), Digitiser)
