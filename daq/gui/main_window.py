@@ -113,6 +113,7 @@ class MainWindow(QMainWindow):
         #: the stop signal that closes the window (:meth:`stop_signal`), or None
         self._stop_signal: int | None = None
         self._closing = False  # a close is waiting for the run's safe state
+        self._asking_close = False  # Close's question (confirm_close) is on screen
         self.run_path: Path | None = None
         self._dirty = False
         self._busy_connect = False
@@ -835,15 +836,28 @@ class MainWindow(QMainWindow):
             return
         self._stop_signal = signum
         self.log(f"{name} received: closing the window", "warning")
+        if self._asking_close:  # Close's question is open: Qt refuses a close inside that one
+            modal = QApplication.activeModalWidget()
+            if modal is not None:
+                modal.close()  # the question returns, and that close goes on as signalled
+            return
         self.close()
 
     def closeEvent(self, event: QCloseEvent) -> None:
         signum = self._stop_signal
-        if signum is not None and not self.running:
-            self.exit_status = 128 + signum
         if self.running:
-            if signum is None and not self.confirm_close():
-                event.ignore()
+            if signum is None:
+                self._asking_close = True
+                try:
+                    yes = self.confirm_close()
+                finally:
+                    self._asking_close = False
+                signum = self._stop_signal  # a signal while the question was open: it wins
+                if signum is None and not yes:
+                    event.ignore()
+                    return
+            if not self.running:  # the run ended while the question was open
+                self._finish_close(event)
                 return
             self._closing = True
             self.abort(
@@ -869,6 +883,11 @@ class MainWindow(QMainWindow):
                     "error",
                 )
                 self.exit_status = int(ExitCode.UNSAFE)
+        self._finish_close(event)
+
+    def _finish_close(self, event: QCloseEvent) -> None:
+        if self._stop_signal is not None and not self.exit_status:
+            self.exit_status = 128 + self._stop_signal  # no run left to give its status
         self._redraw_timer.stop()
         if self.instruments is not None:
             try:

@@ -132,3 +132,24 @@ def test_a_run_that_does_not_end_after_the_abort_is_not_called_safe(
     assert win.exit_status == 3  # unsafe: nothing confirmed the outputs off
     assert "its safe state is not confirmed" in "\n".join(win.log_view.lines)
     assert engine.wait(30) is not None  # the run does end, later
+
+
+def test_a_signal_while_the_close_question_is_open_aborts_the_run(
+    qtbot: Any, tmp_path: Path
+) -> None:
+    """Close's question on screen, then SIGTERM (a log-out): Qt refused the signal's close inside
+    the open one, so the run went on and the process lived until SIGKILL; now the question is
+    dismissed and that close goes on as the signal's."""
+    from PySide6.QtCore import QTimer
+
+    from daq.gui.main_window import MainWindow
+
+    win = running_window(qtbot, tmp_path / "asked.h5", read_sleep_s=0.5)
+    win.confirm_close = MainWindow.confirm_close.__get__(win)  # type: ignore[method-assign]
+    QTimer.singleShot(300, lambda: win.stop_signal(signal.SIGTERM))  # the question is open
+    win.close()
+    assert not win.isVisible()
+    assert win.exit_status == 1
+    run = read_run(tmp_path / "asked.h5")
+    assert run.status == "aborted"
+    assert any("interrupted by SIGTERM" in m for _, _, m in run.log)
