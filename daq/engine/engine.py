@@ -280,9 +280,15 @@ class RunEngine:
             self._emit(EventKind.WARNING, message, message=message, level=level)
 
     def _check_boundary(self) -> None:
-        """At a point boundary: honour pause (wait) and abort (raise)."""
-        while not self._running.is_set():
-            self._running.wait(0.1)
+        """At a point boundary: honour pause (wait) and abort (raise); a pause and its end are
+        recorded in the run's log and file (in the run's thread: the writer's)."""
+        if not self._running.is_set():
+            t0 = time.monotonic()
+            self._log("info", "run paused")
+            while not self._running.is_set():
+                self._running.wait(0.1)
+            if not self._abort.is_set():
+                self._log("info", f"run resumed after {time.monotonic() - t0:.1f} s")
         if self._abort.is_set():
             raise _Aborted()
 

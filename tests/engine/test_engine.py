@@ -174,6 +174,10 @@ def test_pause_and_resume_at_point_boundaries(protocol, bench, out: Path) -> Non
     res = eng.wait(20)
     assert res is not None and res.status == "complete"
     assert "paused" in states and states[-1] == "complete"
+    # the pause is in the run's file and log (the window, which recorded it, no longer does)
+    said = [m for _, _, m in read_run(out).log]
+    assert "run paused" in said
+    assert any(m.startswith("run resumed after ") for m in said)
 
 
 def test_resume_finishes_and_equals_an_uninterrupted_run(protocol, bench, tmp_path: Path) -> None:
