@@ -331,11 +331,6 @@ class Protocol(_Model):
                     f"{{{shown}}} is not allowed in the output pattern; use only {{name}}, "
                     "{timestamp} and {date}, with no attribute, index, conversion or format"
                 )
-        if not v.lower().endswith(".h5"):
-            raise ValueError(
-                f"the output pattern {v!r} must end in .h5 (a run's log is written beside it "
-                "as NAME.log)"
-            )
         return v
 
     @field_validator("amplitudes", mode="before")
@@ -514,6 +509,14 @@ def load_protocol(path: str | Path) -> ProtocolFile:
     except (KeyError, IndexError, ValueError) as exc:
         msg = f"bad pattern ({exc}); use {{name}}, {{timestamp}}, {{date}}"
         raise doc.error(("output",), msg) from None
+    pattern = pf.protocol.output
+    if not pattern.lower().endswith(".h5"):  # a new protocol's; one stored in a run file is
+        # read by parse_protocol and stays resumable (runs made before the rule)
+        raise doc.error(
+            ("output",),
+            f"the output pattern {pattern!r} must end in .h5 (a run's log is written beside "
+            "it as NAME.log)",
+        )
     return pf
 
 

@@ -264,3 +264,23 @@ def test_max_failed_in_a_row_is_bounded_in_one_line() -> None:
     assert "max_failed_in_a_row" in str(err.value) and "\n" not in str(err.value)
     assert make_protocol().protocol.max_failed_in_a_row == 10
     assert make_protocol(**{"retries: 2": "retries: 2\nmax_failed_in_a_row: 0"})
+
+
+def test_a_run_whose_stored_protocol_names_no_h5_output_can_still_be_resumed(
+    bench, tmp_path: Path
+) -> None:
+    """New protocols' output patterns must end in .h5 (a run's log is NAME.log beside it); a
+    run made before that rule stores its protocol with an older pattern, and was refused on
+    --resume ("the request stored ... is unreadable") until the rule applied to new files only
+    (found by a second reader)."""
+    from daq.request import validate_request
+
+    from .helpers import PROTOCOL
+
+    old = make_protocol(PROTOCOL + 'output: "runs/{name}_{timestamp}.hdf5"\n')
+    assert old.protocol.output.endswith(".hdf5")
+    out = tmp_path / "old.h5"
+    _, res, _, _ = _run(old, bench, out, FakeWorld(faults=Faults(stall_on_move=3)))
+    assert res.status == "failed"
+    req = validate_request(resume=out)
+    assert req.resume and req.out == out

@@ -36,11 +36,17 @@ def test_plain_pattern_and_name_still_work() -> None:
     assert pf.protocol.output_path().name.startswith("smoke_")
 
 
-def test_an_output_pattern_not_ending_in_h5_is_refused() -> None:
+def test_an_output_pattern_not_ending_in_h5_is_refused(tmp_path: Path) -> None:
     """A run's log is RUN.log beside RUN.h5: runs named 'ltr.a' and 'ltr.b' shared 'ltr.log',
-    and a run named 'x.log' found its own log in its place and failed (exit 1)."""
+    and a run named 'x.log' found its own log in its place and failed (exit 1). A protocol
+    stored in an older run file keeps its pattern: that run can still be resumed."""
+    from protocols.schema import load_protocol
+
+    text = SMOKE.replace(PATTERN, 'output: "runs/{name}_{timestamp}.log"')
+    (tmp_path / "p.yaml").write_text(text)
     with pytest.raises(ConfigError, match=r":\d+: output: .*must end in \.h5"):
-        parse_protocol(SMOKE.replace(PATTERN, 'output: "runs/{name}_{timestamp}.log"'))
+        load_protocol(tmp_path / "p.yaml")
+    assert parse_protocol(text).protocol.output.endswith(".log")  # the stored protocol's path
 
 
 @pytest.mark.parametrize("name", ["x.log", "ltr.a", "ltr"])
