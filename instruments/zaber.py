@@ -389,7 +389,7 @@ class ZaberStage:
             "microstep_m": step,
             "travel_m": list(travel),
         }
-        self._ensure_speed()  # the device's own range check, before anything moves
+        self._check_speed()  # nothing is sent: check promises to read only
         return dict(self._identity)
 
     def identity(self) -> dict[str, Any]:
@@ -424,12 +424,12 @@ class ZaberStage:
         """Home and block until idle (timeout: :meth:`home_timeout_s`); ``cancel`` set meanwhile
         stops the axis and returns at once, not homed (homing may take minutes)."""
         _ = self.microstep_m  # identity checked before anything moves
+        self._ensure_speed()  # a refused speed before anything moves, not after the homing
         timeout = self.home_timeout_s()
         self.command("home")
         if not self._wait_idle("home", timeout, cancel):
             return
         self._must_home = False
-        self._ensure_speed()
 
     def home_time_s(self) -> float | None:
         """The longest homing (s): the whole travel at the speed the device homes at, the
@@ -455,16 +455,33 @@ class ZaberStage:
             return s.home_timeout_s
         return max(s.home_timeout_s, 1.5 * longest + s.timeout_margin_s)
 
+    def _speed_data(self) -> int:
+        """The bench file's speed as ``maxspeed`` data."""
+        return round(float(self.settings.speed_m_per_s) / self.microstep_m * SPEED_UNIT)
+
+    def _check_speed(self) -> None:
+        """Refuse (:class:`LimitError`, nothing sent) a bench-file speed outside the ``maxspeed``
+        range of the firmware 6 protocol manual, as Zaber's own wrappers copy it: data 1 to
+        resolution x 16384, 10,000 full steps/s, 30.48 mm/s on an X-LSM at any resolution
+        (firmware 7's range was not found; its device still checks when the speed is set).
+        Before, the speed went out only before the first move, after homing: a speed the device
+        refuses failed the run minutes in."""
+        data = self._speed_data()
+        resolution = int((self._identity or {}).get("resolution", self.settings.resolution))
+        if not 1 <= data <= resolution * 16384:
+            raise LimitError(
+                f"{self.transport.name}: stage.speed {self.settings.speed_m_per_s * 1e3:.4g} mm/s "
+                f"in the bench file is outside the stage's range ('maxspeed' data {data}); the "
+                f"protocol manual's range ends at {self._max_speed_m_per_s() * 1e3:.4g} mm/s"
+            )
+
     def _ensure_speed(self) -> None:
-        """``set maxspeed`` to the bench file's speed, once. The device checks its range (the
-        firmware 6 protocol manual, as Zaber's own wrappers copy it: data 1 to resolution x
-        16384, 10,000 full steps/s, 30.48 mm/s on an X-LSM at any resolution; firmware 7's range
-        was not found): a
-        refusal is a :class:`LimitError` naming the bench field, at connect, not at the first
-        move minutes into a run."""
+        """``set maxspeed`` to the bench file's speed, once, before the stage moves; a device
+        that refuses it (a firmware with another range) is a :class:`LimitError` naming the
+        bench field."""
         if not self._speed_set:
             s = self.settings
-            data = round(float(s.speed_m_per_s) / self.microstep_m * SPEED_UNIT)
+            data = self._speed_data()
             try:
                 self.command(f"set maxspeed {data}")
             except Rejected as exc:

@@ -44,7 +44,6 @@ LIMITS = [  # what connect() reads before the first move
     ("/1 1 get resolution", "@01 1 OK IDLE -- 64"),
     ("/1 1 get limit.min", "@01 1 OK IDLE -- 0"),
     ("/1 1 get limit.max", "@01 1 OK IDLE -- 300000"),
-    ("/1 1 set maxspeed 40960", "@01 1 OK IDLE -- 0"),  # 25 mm/s, checked by the device
 ]
 
 
@@ -86,6 +85,7 @@ def test_move_polls_until_idle_then_settles() -> None:
         [
             *LIMITS,
             ("/1 1 warnings", "@01 1 OK IDLE -- 00"),
+            ("/1 1 set maxspeed 40960", "@01 1 OK IDLE -- 0"),
             ("/1 1 get pos", "@01 1 OK IDLE -- 20000"),
             ("/1 1 move abs 50000", "@01 1 OK BUSY -- 0"),
             ("/1 1 get pos", "@01 1 OK BUSY -- 0"),
@@ -104,6 +104,7 @@ def test_same_side_approach_from_below() -> None:
         [
             *LIMITS,
             ("/1 1 warnings", "@01 1 OK IDLE -- 00"),
+            ("/1 1 set maxspeed 40960", "@01 1 OK IDLE -- 0"),
             ("/1 1 get pos", "@01 1 OK IDLE -- 100000"),
             ("/1 1 move abs 49000", "@01 1 OK BUSY -- 0"),
             ("/1 1 get pos", "@01 1 OK IDLE -- 0"),
@@ -120,6 +121,7 @@ def test_stall_flag_and_rejection_are_errors() -> None:
     t = ScriptedTransport(
         [
             *LIMITS,
+            ("/1 1 set maxspeed 40960", "@01 1 OK IDLE -- 0"),  # before anything moves
             ("/1 1 get maxspeed", "@01 1 OK IDLE -- 40960"),
             ("/1 1 get limit.approach.maxspeed", "@01 1 OK IDLE -- 40960"),
             ("/1 1 home", "@01 1 OK IDLE FS 0"),
