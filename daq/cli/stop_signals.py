@@ -10,11 +10,18 @@ from __future__ import annotations
 import os
 import signal
 import sys
+import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from types import FrameType
 
-__all__ = ["StopSignal", "leave_the_terminal", "stop_signals", "stop_signals_interrupt"]
+__all__ = [
+    "StopSignal",
+    "leave_the_terminal",
+    "raise_if_stopped",
+    "stop_signals",
+    "stop_signals_interrupt",
+]
 
 
 class StopSignal(KeyboardInterrupt):
@@ -40,10 +47,26 @@ def stop_signals() -> tuple[int, ...]:
     return tuple(out)
 
 
+#: the stop signal raised within :func:`stop_signals_interrupt`, or None
+_raised: list[int] = []
+
+
 def _raise_stop(signum: int, frame: FrameType | None) -> None:
+    if _raised:  # a second one (systemd sends SIGTERM then SIGHUP): the first is on its way,
+        return  # and a raise now could land in the clean-up (a thread's join, a file's close)
+    _raised.append(signum)
     if signum == getattr(signal, "SIGHUP", None):
         leave_the_terminal()  # a line printed on the way out would fail: the terminal is gone
     raise StopSignal(signum)
+
+
+def raise_if_stopped() -> None:
+    """At a safe point of a long command (a study's task boundary): raise the
+    :class:`StopSignal` of a signal that came before, in case Python swallowed it where it
+    landed (an exception in a weakref callback is printed and dropped: the study ran on with its
+    output open)."""
+    if _raised:
+        raise StopSignal(_raised[0])
 
 
 @contextmanager
@@ -51,14 +74,20 @@ def stop_signals_interrupt() -> Iterator[None]:
     """Within the block, SIGTERM, SIGHUP (unless ignored) and SIGBREAK raise :class:`StopSignal`
     as SIGINT raises KeyboardInterrupt: a ``kill``, a closed terminal or a batch system's time
     limit ends a ``biafc`` command the way Ctrl-C does, not by the default action, which left
-    a study's output open for writing (readable only after ``biafc repair``). The previous
-    handlers come back at the end."""
+    a study's output open for writing (readable only after ``biafc repair``). Only the first
+    such signal raises; later ones are ignored. The previous handlers come back at the end.
+    Off the main thread (where Python cannot install handlers) the block runs as it is."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    _raised.clear()
     old = {s: signal.signal(s, _raise_stop) for s in stop_signals() if s != signal.SIGINT}
     try:
         yield
     finally:
         for s, h in old.items():
             signal.signal(s, h)
+        _raised.clear()
 
 
 def leave_the_terminal() -> None:

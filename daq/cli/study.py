@@ -158,6 +158,7 @@ def _run(args: argparse.Namespace, setup: Any, table: Any, store: Any, client: A
     import numpy as np
 
     from analysis.study_cells import STATUS_FAILED, STATUS_INACCURATE
+    from daq.cli.stop_signals import raise_if_stopped
     from daq.progress import ProgressDisplay
     from daq.store.disk_space import DiskFull
     from daq.study_runner import dask_client, no_worker_notice, run_study
@@ -176,6 +177,7 @@ def _run(args: argparse.Namespace, setup: Any, table: Any, store: Any, client: A
         ) as progress:
 
             def on_task(i: int, res: Any, n_done: int) -> None:
+                raise_if_stopped()  # a stop signal Python swallowed where it landed
                 progress.update(n_done, detail=f"task {i}")
 
             if args.workers == 0:
