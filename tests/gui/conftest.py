@@ -73,12 +73,24 @@ def make_assembler(read_sleep_s: float = 0.0) -> Callable[[Any, int | None], Any
     return sim
 
 
+def _window_output(tmp_path: Path) -> Path:
+    """The run file of :func:`window`: in the test's folder, or, when the screenshots go to the
+    docs, ``runs/smoke_run.h5`` under the working folder (ignored by git), so that the pictures
+    show a path that names no machine (they showed ``/tmp/pytest-of-root/...``)."""
+    if not os.environ.get("BIAFC_SCREENSHOTS"):
+        return tmp_path / "run.h5"
+    out = Path("runs") / "smoke_run.h5"
+    for old in (out, out.with_suffix(".log"), out.with_name(out.name + ".lock")):
+        old.unlink(missing_ok=True)
+    return out
+
+
 @pytest.fixture
 def window(qtbot: Any, tmp_path: Path) -> Iterator[MainWindow]:
     win = MainWindow(None, SMOKE, assembler=make_assembler(read_sleep_s=0.03))
     win.confirm_close = lambda: True  # type: ignore[method-assign]
     qtbot.addWidget(win)
-    win.run_panel.out_edit.setText(shown_path(tmp_path / "run.h5"))
+    win.run_panel.out_edit.setText(shown_path(_window_output(tmp_path)))
     win.show()
     yield win
     if win.running:

@@ -59,12 +59,13 @@ def test_smoke_run_to_completion(
     assert win.views.bands.n_bands >= 2
     assert win.run_panel.progress.value() == 6
     # the file is complete
-    run = read_run(tmp_path / "run.h5")
+    out = Path(win.run_panel.out_edit.text())  # the fixture's (runs/ for the docs' pictures)
+    run = read_run(out)
     assert run.status == "complete"
     assert bool(np.all(run.scans["ltr"].done == PointState.DONE))
     assert np.all(np.isfinite(run.scans["ltr"].velocity))
     # the same logging as the command line: the run's log file beside the run file
-    log = (tmp_path / "run.log").read_text()
+    log = out.with_suffix(".log").read_text()
     assert "biafc.gui: starting run" in log and "biafc.run: run started" in log
     assert "complete: 6 points" in log
     # each line once: the window does not record again what the engine recorded (before:
@@ -210,7 +211,7 @@ def test_browse_finished_run_file(qtbot: Any, window: MainWindow, tmp_path: Path
     fresh = MainWindow(None, None, assembler=make_assembler())
     qtbot.addWidget(fresh)
     with qtbot.waitCallback(timeout=30_000) as cb:
-        fresh.open_run_file(tmp_path / "run.h5", on_done=cb)
+        fresh.open_run_file(Path(win.run_panel.out_edit.text()), on_done=cb)
     assert cb.args == [True]
     assert fresh.live.n_points == 6
     assert fresh.views.spatial.n_rows == 3
@@ -220,7 +221,7 @@ def test_browse_finished_run_file(qtbot: Any, window: MainWindow, tmp_path: Path
     from protocols.runfile import ScanSpec
 
     empty = tmp_path / "empty.h5"
-    run = read_run(tmp_path / "run.h5")
+    run = read_run(Path(win.run_panel.out_edit.text()))
     specs = [
         ScanSpec(s.direction, s.amplitudes, s.amplitude_units, s.cylinders, s.time_s,
                  s.f_center_Hz, s.cycles, s.width_s, s.averages, s.drive_units)
@@ -251,7 +252,7 @@ def test_export_figures_from_window(qtbot: Any, window: MainWindow, tmp_path: Pa
     with qtbot.waitSignal(win.run_finished, timeout=120_000):
         win.run_panel.start_button.click()
     with qtbot.waitCallback(timeout=120_000) as cb:
-        win.export_figures(tmp_path / "run.h5", tmp_path / "figs", on_done=cb)
+        win.export_figures(Path(win.run_panel.out_edit.text()), tmp_path / "figs", on_done=cb)
     assert cb.args == [True], win.log_view.lines[-2:]
     assert any((tmp_path / "figs").glob("*.png"))
 
