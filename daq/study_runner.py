@@ -169,6 +169,9 @@ def dask_client(workers: int) -> Iterator[Any]:
         threads_per_worker=1,
         processes=True,
         dashboard_address=None,
+        # the scheduler serves its HTTP routes even without a dashboard, on 8787 unless told:
+        # another process there printed "Port 8787 is already in use" in the study's terminal
+        scheduler_kwargs={"dashboard_address": ":0"},
         silence_logs=logging.ERROR,
         env=_numba_threads_env(workers),
         preload=["daq.study_worker"],  # a terminal's Ctrl-C is the study's, not each worker's
