@@ -205,3 +205,20 @@ ns = app.argparse.Namespace(bench=None, protocol=None, run=None, connect=False, 
                             quiet=False)
 sys.exit(app.run_window(ns))
 """
+
+
+def wait_first_point(proc: Any, out: Path, timeout_s: float = 90.0) -> None:
+    """Wait until the window process ``proc`` (of :data:`RUN_AT_ONCE_SCRIPT`) has measured a
+    point into ``out``; it must not end before."""
+    from protocols.runfile import PointState, read_run
+
+    t_end = time.monotonic() + timeout_s
+    while time.monotonic() < t_end:
+        assert proc.poll() is None, proc.communicate()
+        try:
+            if (read_run(out).scans["ltr"].done == PointState.DONE).any():
+                return
+        except (OSError, ValueError, KeyError):
+            pass
+        time.sleep(0.1)
+    raise AssertionError(f"no point measured in {timeout_s:g} s")

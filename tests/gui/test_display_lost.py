@@ -19,9 +19,9 @@ import pytest
 from PySide6.QtCore import qWarning
 
 from daq.gui.display_lost import watch_display
-from protocols.runfile import PointState, read_run
+from protocols.runfile import read_run
 
-from .conftest import RUN_AT_ONCE_SCRIPT, running_window
+from .conftest import RUN_AT_ONCE_SCRIPT, running_window, wait_first_point
 
 ROOT = Path(__file__).resolve().parents[2]
 BROKE = "The X11 connection broke (error 1). Did the X11 server die?"
@@ -88,15 +88,7 @@ def test_a_real_display_lost_mid_run_ends_the_run_safely(tmp_path: Path) -> None
     proc = subprocess.Popen([sys.executable, "-c", RUN_AT_ONCE_SCRIPT, str(out)], env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
     try:
-        t_end = time.monotonic() + 60
-        while time.monotonic() < t_end:  # the display goes once a point is measured
-            assert proc.poll() is None, proc.communicate()
-            try:
-                if (read_run(out).scans["ltr"].done == PointState.DONE).any():
-                    break
-            except (OSError, ValueError, KeyError):
-                pass
-            time.sleep(0.1)
+        wait_first_point(proc, out, 60)  # the display goes once a point is measured
         server.send_signal(signal.SIGTERM)
         _, stderr = proc.communicate(timeout=60)
     finally:

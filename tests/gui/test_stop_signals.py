@@ -17,9 +17,9 @@ from typing import Any
 
 import pytest
 
-from protocols.runfile import PointState, read_run
+from protocols.runfile import read_run
 
-from .conftest import RUN_AT_ONCE_SCRIPT, running_window
+from .conftest import RUN_AT_ONCE_SCRIPT, running_window, wait_first_point
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -32,19 +32,6 @@ def _window(out: Path, script: str = RUN_AT_ONCE_SCRIPT) -> subprocess.Popen[str
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
 
 
-def _first_point(proc: subprocess.Popen[str], out: Path) -> None:
-    t_end = time.monotonic() + 90
-    while time.monotonic() < t_end:
-        assert proc.poll() is None, proc.communicate()
-        try:
-            if (read_run(out).scans["ltr"].done == PointState.DONE).any():
-                return
-        except (OSError, ValueError, KeyError):
-            pass
-        time.sleep(0.1)
-    raise AssertionError("no point measured in 90 s")
-
-
 @pytest.mark.parametrize(("sig", "status"), [("SIGTERM", 1), ("SIGHUP", 1), ("SIGINT", 130)])
 def test_a_stop_signal_mid_run_aborts_it_safely_and_exits_with_its_status(
     tmp_path: Path, sig: str, status: int
@@ -52,7 +39,7 @@ def test_a_stop_signal_mid_run_aborts_it_safely_and_exits_with_its_status(
     out = tmp_path / "s.h5"
     proc = _window(out)
     try:
-        _first_point(proc, out)
+        wait_first_point(proc, out)
         proc.send_signal(getattr(signal, sig))
         rc = proc.wait(60)
         _, stderr = proc.communicate()
