@@ -171,7 +171,7 @@ def dask_client(workers: int) -> Iterator[Any]:
         dashboard_address=None,
         # the scheduler serves its HTTP routes even without a dashboard, on 8787 unless told:
         # another process there printed "Port 8787 is already in use" in the study's terminal
-        scheduler_kwargs={"dashboard_address": ":0"},
+        scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
         silence_logs=logging.ERROR,
         env=_numba_threads_env(workers),
         preload=["daq.study_worker"],  # a terminal's Ctrl-C is the study's, not each worker's

@@ -433,10 +433,11 @@ class ZaberStage:
 
     def home_time_s(self) -> float | None:
         """The longest homing (s): the whole travel at the speed the device homes at, the
-        lesser of ``maxspeed`` and ``limit.approach.maxspeed`` (the protocol manual); None when
-        the device has no such settings."""
+        lesser of ``maxspeed`` (the bench file's: :meth:`home` sets it first) and
+        ``limit.approach.maxspeed`` (the protocol manual); None when the device has no
+        approach speed setting."""
         try:
-            rates = [self._get_int("maxspeed"), self._get_int("limit.approach.maxspeed")]
+            rates = [self._speed_data(), self._get_int("limit.approach.maxspeed")]
         except ReplyError:
             return None
         positive = [r for r in rates if r > 0]

@@ -11,9 +11,11 @@ import os
 import signal
 import sys
 import threading
+import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from types import FrameType
+from typing import Any
 
 __all__ = [
     "StopSignal",
@@ -47,16 +49,24 @@ def stop_signals() -> tuple[int, ...]:
     return tuple(out)
 
 
-#: the stop signal raised within :func:`stop_signals_interrupt`, or None
-_raised: list[int] = []
+#: ``[signal, monotonic time]`` of the stop signal raised within
+#: :func:`stop_signals_interrupt`; empty when none
+_raised: list[Any] = []
+#: a stop signal this long after the one raised raises again (s): the first was swallowed where
+#: it landed, or the clean-up hangs; sooner, it is the same stop (ignored)
+REPEAT_AFTER_S = 5.0
 
 
 def _raise_stop(signum: int, frame: FrameType | None) -> None:
-    if _raised:  # a second one (systemd sends SIGTERM then SIGHUP): the first is on its way,
-        return  # and a raise now could land in the clean-up (a thread's join, a file's close)
-    _raised.append(signum)
     if signum == getattr(signal, "SIGHUP", None):
         leave_the_terminal()  # a line printed on the way out would fail: the terminal is gone
+    now = time.monotonic()
+    if _raised and now - _raised[1] < REPEAT_AFTER_S:
+        # a second one (systemd sends SIGTERM then SIGHUP): the first is on its way, and a
+        # raise now could land in the clean-up (a thread's join, a file's close)
+        return
+    # the first one, or one long after it: that one was lost (swallowed where it landed)
+    _raised[:] = [_raised[0] if _raised else signum, now]
     raise StopSignal(signum)
 
 

@@ -64,3 +64,40 @@ def test_biafc_runs_off_the_main_thread() -> None:
     t.start()
     t.join(60)
     assert got == [0], got
+
+
+def test_a_sighup_after_the_first_signal_still_leaves_the_terminal(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """SIGTERM then SIGHUP (the terminal closes as the command stops): the ignored second one
+    returned before sending the output to the null device, and a line printed on the way out
+    failed on the hung-up terminal (a traceback, exit 1)."""
+    import daq.cli.stop_signals as ss
+
+    left: list[bool] = []
+    monkeypatch.setattr(ss, "leave_the_terminal", lambda: left.append(True))
+    with stop_signals_interrupt():
+        with pytest.raises(StopSignal):
+            os.kill(os.getpid(), signal.SIGTERM)
+            _wait_for_signal()
+        os.kill(os.getpid(), signal.SIGHUP)  # ignored, but the terminal is gone
+        time.sleep(0.05)
+    assert left == [True]
+
+
+def test_a_signal_long_after_a_swallowed_one_raises_again(monkeypatch: pytest.MonkeyPatch) -> None:
+    """After a stop signal swallowed where it landed, every later SIGTERM was ignored: the
+    command stopped only on Ctrl-C or SIGKILL."""
+    import daq.cli.stop_signals as ss
+
+    monkeypatch.setattr(ss, "REPEAT_AFTER_S", 0.2)
+    with stop_signals_interrupt():
+        try:
+            os.kill(os.getpid(), signal.SIGTERM)
+            _wait_for_signal()
+        except StopSignal:
+            pass  # swallowed
+        time.sleep(0.3)
+        with pytest.raises(StopSignal):
+            os.kill(os.getpid(), signal.SIGTERM)
+            _wait_for_signal()

@@ -140,3 +140,24 @@ def test_a_signal_while_the_close_question_is_open_aborts_the_run(
     run = read_run(tmp_path / "asked.h5")
     assert run.status == "aborted"
     assert any("interrupted by SIGTERM" in m for _, _, m in run.log)
+
+
+def test_a_run_that_ends_while_the_close_question_is_open_gives_its_status(
+    qtbot: Any, tmp_path: Path
+) -> None:
+    """The run ended (here aborted) while Close's question was on screen, then the answer came:
+    the window exited 0 whatever the run's end (an unsafe one too), where it had given the
+    run's status (found by a second reader)."""
+    win = running_window(qtbot, tmp_path / "ended.h5", read_sleep_s=0.2)
+    engine = win.engine
+
+    def question_while_the_run_ends() -> bool:
+        engine.abort("ended while asking")
+        assert engine.wait(30) is not None
+        return True
+
+    win.confirm_close = question_while_the_run_ends  # type: ignore[method-assign]
+    win.close()
+    assert not win.isVisible()
+    assert engine.result.status == "aborted"
+    assert win.exit_status == 1

@@ -122,7 +122,6 @@ def test_stall_flag_and_rejection_are_errors() -> None:
         [
             *LIMITS,
             ("/1 1 set maxspeed 40960", "@01 1 OK IDLE -- 0"),  # before anything moves
-            ("/1 1 get maxspeed", "@01 1 OK IDLE -- 40960"),
             ("/1 1 get limit.approach.maxspeed", "@01 1 OK IDLE -- 40960"),
             ("/1 1 home", "@01 1 OK IDLE FS 0"),
             ("/1 1 get foo", "@01 1 RJ IDLE -- BADCOMMAND"),

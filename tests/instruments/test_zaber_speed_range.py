@@ -61,3 +61,20 @@ def test_a_device_that_refuses_the_speed_when_it_is_set_names_the_field() -> Non
                                          r"\(BADDATA\)"):  # fmt: skip
         stage.home()
     assert not any(" home" in c for c in emu.commands)  # refused before the stage moved
+
+
+def test_the_longest_homing_is_at_the_bench_files_speed() -> None:
+    """The run says how long homing may take before it starts; it read the device's stored
+    speed, which homing replaces with the bench file's first: 20 mm/s stored and 2 mm/s in the
+    bench file said "at most 25 s" for a homing of up to 250 s."""
+    clock = SimClock()
+    emu = ZaberEmulator(clock, model="X-LSM500A", travel_m=(0.0, 0.5), speed_m_per_s=0.020)
+    emu.approach_maxspeed = emu.maxspeed
+    settings = ZaberSettings(model="X-LSM500A", speed_m_per_s=0.002, clock=clock)
+    stage = ZaberStage(SimTransport(emu, "stage", 1.0, clock), settings)
+    stage.connect()
+    longest = stage.home_time_s()
+    assert longest == pytest.approx(0.5 / 0.002, rel=1e-3)
+    t0 = clock.now()
+    stage.home()
+    assert clock.now() - t0 <= longest
