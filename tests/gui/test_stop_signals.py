@@ -93,10 +93,16 @@ def test_sigterm_with_no_run_closes_the_window_at_once(tmp_path: Path) -> None:
 def test_a_second_signal_while_closing_waits_for_the_same_safe_state(
     qtbot: Any, tmp_path: Path
 ) -> None:
-    from PySide6.QtCore import QTimer
-
     win = running_window(qtbot, tmp_path / "twice.h5", read_sleep_s=0.5)
-    QTimer.singleShot(50, lambda: win.stop_signal(signal.SIGTERM))  # during the first's wait
+    engine_wait, seconds = win.engine.wait, []
+
+    def wait(timeout_s: float) -> Any:  # the second signal comes during the first's wait
+        if not seconds:
+            seconds.append(True)
+            win.stop_signal(signal.SIGTERM)
+        return engine_wait(timeout_s)
+
+    win.engine.wait = wait
     win.stop_signal(signal.SIGTERM)
     assert win.exit_status == 1
     assert read_run(tmp_path / "twice.h5").status == "aborted"
