@@ -102,7 +102,7 @@ def validate_request(
     from daq.store.lock import in_use_by
     from protocols.bench import load_bench
     from protocols.runfile import pending_points
-    from protocols.schema import load_protocol, shipped_protocols
+    from protocols.schema import load_protocol, output_pattern_problem, shipped_protocols
     from protocols.yamlfile import ConfigError
 
     if seed is not None and seed < 0:
@@ -143,6 +143,10 @@ def validate_request(
             sim_world_config(bf)  # its faults and integrator, as the run would build them
         plan = make_plan(pf, bf)
         target = _target(pf, out, resume)
+        if out is None and resume is None:  # the protocol's pattern names it (the window's
+            why = output_pattern_problem(pf.protocol.output)  # editor, as typed: no file read)
+            if why is not None:
+                raise pf.error(("output",), why)
         changes: list[str] = []
         if check_output:
             if resume is not None:

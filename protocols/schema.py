@@ -509,15 +509,21 @@ def load_protocol(path: str | Path) -> ProtocolFile:
     except (KeyError, IndexError, ValueError) as exc:
         msg = f"bad pattern ({exc}); use {{name}}, {{timestamp}}, {{date}}"
         raise doc.error(("output",), msg) from None
-    pattern = pf.protocol.output
-    if not pattern.lower().endswith(".h5"):  # a new protocol's; one stored in a run file is
-        # read by parse_protocol and stays resumable (runs made before the rule)
-        raise doc.error(
-            ("output",),
-            f"the output pattern {pattern!r} must end in .h5 (a run's log is written beside "
-            "it as NAME.log)",
-        )
+    why = output_pattern_problem(pf.protocol.output)
+    if why is not None:  # a new protocol's; one stored in a run file is read by parse_protocol
+        raise doc.error(("output",), why)  # and stays resumable (runs made before the rule)
     return pf
+
+
+def output_pattern_problem(pattern: str) -> str | None:
+    """Why a new run may not take its file name from ``pattern``, or None: the name must end in
+    .h5, since a run's log is ``NAME.log`` beside it (``a.x`` and ``a.y`` would share one)."""
+    if pattern.lower().endswith(".h5"):
+        return None
+    return (
+        f"the output pattern {pattern!r} must end in .h5 (a run's log is written beside it "
+        "as NAME.log)"
+    )
 
 
 def parse_protocol(text: str, source: str = "<protocol>") -> ProtocolFile:

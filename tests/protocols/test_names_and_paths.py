@@ -58,3 +58,14 @@ def test_a_run_file_not_named_h5_is_refused_before_anything_is_written(
     with pytest.raises(RequestError, match=r"--out: .*a run file's name ends in \.h5"):
         validate_request("smoke", out=tmp_path / name)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_the_windows_protocol_check_refuses_a_pattern_not_ending_in_h5() -> None:
+    """The window checks a protocol as it is typed (no file read, the output not checked yet):
+    a pattern ending in .hdf5 passed its Dry run and was refused only at Start."""
+    from daq.request import RequestError, validate_request
+
+    pf = parse_protocol(SMOKE.replace(PATTERN, 'output: "runs/{name}_{timestamp}.hdf5"'))
+    with pytest.raises(RequestError, match=r"output: .*must end in \.h5"):
+        validate_request(pf, None, check_output=False)
+    validate_request(parse_protocol(SMOKE), None, check_output=False)  # the shipped one passes
