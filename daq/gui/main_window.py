@@ -856,17 +856,8 @@ class MainWindow(QMainWindow):
                 if signum is None and not yes:
                     event.ignore()
                     return
-            if not self.running:  # the run ended while the question was open: its status
-                result = self.engine.result if self.engine is not None else None
-                if result is not None:
-                    from daq.engine.outcome import exit_code
-
-                    sigint = signum == signal.SIGINT
-                    self.exit_status = int(exit_code(result, sigint=sigint))
-                self._finish_close(event)
-                return
             self._closing = True
-            self.abort(
+            self.abort(  # no effect on a run that ended while the question was open
                 "window closed during the run"
                 if signum is None
                 else f"interrupted by {signal.Signals(signum).name}"
