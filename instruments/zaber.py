@@ -468,8 +468,7 @@ class ZaberStage:
         Before, the speed went out only before the first move, after homing: a speed the device
         refuses failed the run minutes in."""
         data = self._speed_data()
-        resolution = int((self._identity or {}).get("resolution", self.settings.resolution))
-        if not 1 <= data <= resolution * 16384:
+        if not 1 <= data <= self._max_speed_data():
             raise LimitError(
                 f"{self.transport.name}: stage.speed {self.settings.speed_m_per_s * 1e3:.4g} mm/s "
                 f"in the bench file is outside the stage's range ('maxspeed' data {data}); the "
@@ -494,11 +493,14 @@ class ZaberStage:
                 ) from None
             self._speed_set = True
 
+    def _max_speed_data(self) -> int:
+        """The protocol manual's ceiling of ``maxspeed`` data: resolution (as read at connect)
+        x 16384."""
+        return int((self._identity or {}).get("resolution", self.settings.resolution)) * 16384
+
     def _max_speed_m_per_s(self) -> float:
-        """The protocol manual's ceiling of ``maxspeed`` in m/s at the resolution read at
-        connect (data resolution x 16384)."""
-        resolution = (self._identity or {}).get("resolution", self.settings.resolution)
-        return int(resolution) * 16384 / SPEED_UNIT * self.microstep_m
+        """:meth:`_max_speed_data` in m/s."""
+        return self._max_speed_data() / SPEED_UNIT * self.microstep_m
 
     def speed(self) -> float:
         """Current ``maxspeed`` in m/s."""

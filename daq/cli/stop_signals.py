@@ -85,7 +85,8 @@ def stop_signals_interrupt() -> Iterator[None]:
     as SIGINT raises KeyboardInterrupt: a ``kill``, a closed terminal or a batch system's time
     limit ends a ``biafc`` command the way Ctrl-C does, not by the default action, which left
     a study's output open for writing (readable only after ``biafc repair``). Only the first
-    such signal raises; later ones are ignored. The previous handlers come back at the end.
+    such signal raises; later ones are ignored unless :data:`REPEAT_AFTER_S` has passed. The
+    previous handlers come back at the end.
     Off the main thread (where Python cannot install handlers) the block runs as it is."""
     if threading.current_thread() is not threading.main_thread():
         yield
