@@ -515,10 +515,16 @@ def load_protocol(path: str | Path) -> ProtocolFile:
     return pf
 
 
+def names_a_run_file(name: str | Path) -> bool:
+    """Whether a new run may be written under ``name``: it ends in .h5, since a run's log is
+    ``NAME.log`` beside it (``a.x`` and ``a.y`` would share one; ``x.log`` would be its own)."""
+    return Path(name).suffix.lower() == ".h5"
+
+
 def output_pattern_problem(pattern: str) -> str | None:
-    """Why a new run may not take its file name from ``pattern``, or None: the name must end in
-    .h5, since a run's log is ``NAME.log`` beside it (``a.x`` and ``a.y`` would share one)."""
-    if pattern.lower().endswith(".h5"):
+    """Why a new run may not take its file name from ``pattern`` (:func:`names_a_run_file`),
+    or None."""
+    if names_a_run_file(pattern):
         return None
     return (
         f"the output pattern {pattern!r} must end in .h5 (a run's log is written beside it "

@@ -29,7 +29,7 @@ from protocols.bench import BenchFile
 from protocols.legacy import upgrade_protocol_text
 from protocols.one_line import first_line
 from protocols.runfile import ChainInfo, RunFileWriter, ScanSpec
-from protocols.schema import ProtocolFile, parse_protocol
+from protocols.schema import ProtocolFile, names_a_run_file, parse_protocol
 from protocols.yamlfile import ConfigError
 
 __all__ = [
@@ -97,7 +97,7 @@ def check_output_path(path: Path, *, resume: bool = False) -> None:
         return
     if path.is_dir():
         raise StoreError(f"--out: {path} is a folder; give a run file name (e.g. {path}/run.h5)")
-    if path.suffix.lower() != ".h5":  # RUN.h5's log is RUN.log: 'a.x' and 'a.y' shared a.log
+    if not names_a_run_file(path):
         raise StoreError(
             f"--out: {path}: a run file's name ends in .h5 (its log is written beside it as "
             f"NAME.log); e.g. --out {path.with_name(path.name + '.h5')}"
