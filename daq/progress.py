@@ -19,7 +19,13 @@ import time
 from types import TracebackType
 from typing import Any, TextIO
 
-__all__ = ["ProgressDisplay", "format_duration", "format_rate"]
+__all__ = ["ProgressDisplay", "format_duration", "format_minutes", "format_rate"]
+
+
+def format_minutes(seconds: float) -> str:
+    """``"2 min 30 s"`` or ``"45 s"`` (whole seconds): a bound said in words, as the homing's."""
+    minutes, s = divmod(round(max(0.0, seconds)), 60)
+    return f"{minutes} min {s} s" if minutes else f"{s} s"
 
 
 def format_duration(seconds: float) -> str:

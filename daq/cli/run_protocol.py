@@ -167,11 +167,13 @@ def run(args: argparse.Namespace) -> int:
     req = _request(args)
     pf, bf, plan, out = req.protocol, req.bench, req.plan, req.out
     if args.dry_run:
+        from daq.engine.eta import homing_note
+
         basis = plan.costs.basis if plan.costs is not None else "the plan"
         print(
             f"protocol {pf.protocol.name!r} on {bf.bench.name!r}: {plan.n_points} points, "
             f"estimated {_fmt_s(plan.estimated_s)} ({plan.estimated_s:.1f} s, from {basis}); "
-            f"output {out}"
+            f"output {out}{homing_note(bf)}"
         )
         return 0
     return _execute(pf, bf, out, req.resume, req.seed, args.quiet, req.accept_bench_change)

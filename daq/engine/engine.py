@@ -91,8 +91,9 @@ def _homing_time(stage: Any) -> str:
         return ""
     if longest is None or not longest > 0:
         return ""
-    minutes, seconds = divmod(round(longest), 60)
-    return f" (at most {minutes} min {seconds} s)" if minutes else f" (at most {seconds} s)"
+    from daq.progress import format_minutes
+
+    return f" (at most {format_minutes(longest)})"
 
 
 def _jsonable(obj: Any) -> Any:

@@ -43,6 +43,8 @@ __all__ = [
     "PointCosts",
     "arms_burst",
     "dem_run_estimate_s",
+    "homing_bound",
+    "homing_note",
     "load_factor",
     "model_compiled",
     "prior_costs",
@@ -86,6 +88,64 @@ def load_factor() -> float:
     except (AttributeError, OSError):
         return 1.0
     return max(1.0, (load + 1.0) / (os.cpu_count() or 1))
+
+
+@dataclass(frozen=True)
+class HomingBound:
+    """The longest homing of a bench's stage before a run, from the bench file alone: ``s``
+    wall seconds, ``how`` what that is (travel and speed, printed with the dry run)."""
+
+    s: float
+    how: str
+
+
+def homing_bound(bench_file: Any) -> HomingBound | None:
+    """How long homing the stage may take before the first point (a run homes a stage that is
+    not homed), from the bench file: the whole travel at ``stage.speed``, the speed homing sets
+    first. The travel is the simulated stage's ``simulation.stage_travel``; on a real bench the
+    model's nominal travel (``X-LSM500A``: 500 mm), or the upper soft limit where the file
+    names a microstep instead. The stage may home slower (its ``limit.approach.maxspeed``); the
+    run reads that at connect and says its own bound. ``None`` on a simulated bench that does
+    not wait (``speedup: 0``: homing takes no wall time there)."""
+    from instruments.errors import LimitError
+    from instruments.zaber import microstep_of_model
+
+    bench = bench_file.bench
+    stage = bench.stage
+    speed = float(stage.speed)
+    if bench.simulated:
+        speedup = float(getattr(bench.simulation, "speedup", 0.0) or 0.0)
+        if speedup <= 0:
+            return None
+        lo, hi = (float(x) for x in bench.simulation.stage_travel)
+        s = (hi - lo) / speed / speedup
+        return HomingBound(s, f"{(hi - lo) * 1e3:.4g} mm at {speed * 1e3:.4g} mm/s, x1/{speedup:g}")
+    travel, whose = float(stage.soft_limits[1]), "the upper soft limit"
+    if stage.model:
+        try:
+            travel, whose = microstep_of_model(stage.model, stage.resolution)[1], stage.model
+        except LimitError:
+            pass
+    return HomingBound(
+        travel / speed,
+        f"{whose}: {travel * 1e3:.4g} mm at {speed * 1e3:.4g} mm/s; longer if the stage's "
+        "limit.approach.maxspeed is lower",
+    )
+
+
+def homing_note(bench_file: Any) -> str:
+    """``"; before the first point the stage homes if it is not homed: at most 20 s (...)"``, for
+    a dry run's line (not in its estimate: whether the stage is homed is known only at
+    connect), or "" (:func:`homing_bound`)."""
+    bound = homing_bound(bench_file)
+    if bound is None:
+        return ""
+    from daq.progress import format_minutes
+
+    return (
+        "; before the first point the stage homes if it is not homed: at most "
+        f"{format_minutes(bound.s)} ({bound.how})"
+    )
 
 
 def arms_burst(points: Sequence[Any]) -> list[bool]:

@@ -28,6 +28,7 @@ from PySide6.QtWidgets import (
 )
 
 from daq.cli.console_close import CLOSE_BOUND_S
+from daq.engine.eta import homing_note
 from daq.gui import gui_gc, refcount_guard
 from daq.gui.adapter import EngineEventAdapter
 from daq.gui.background import BackgroundCall
@@ -511,7 +512,7 @@ class MainWindow(QMainWindow):
         self.log(
             f"dry run: {self.plan.n_points} points, estimated "
             f"{format_duration(self.plan.estimated_s)} ({self.plan.estimated_s:.1f} s); "
-            f"output {shown_path(out)}"
+            f"output {shown_path(out)}{homing_note(self.bench_file)}"
         )
 
     # -- run -------------------------------------------------------------------------------

@@ -26,15 +26,9 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
+from daq.progress import format_duration
+
 __all__ = ["BenchPanel", "LogView", "ProtocolPanel", "RunPanel", "format_duration"]
-
-
-def format_duration(s: float) -> str:
-    """``mm:ss`` or ``h:mm:ss`` (s in seconds)."""
-    s = max(0.0, float(s))
-    h, rem = divmod(round(s), 3600)
-    m, sec = divmod(rem, 60)
-    return f"{h}:{m:02d}:{sec:02d}" if h else f"{m:02d}:{sec:02d}"
 
 
 def _label_rows(values: dict[str, Any]) -> list[tuple[str, str]]:

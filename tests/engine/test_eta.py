@@ -48,6 +48,23 @@ def test_sim_bench_estimate_includes_the_first_compile(capsys, monkeypatch) -> N
     assert s >= eta_mod.COMPILE_S and "compiled first" in out and "once" in out
 
 
+def test_dry_run_says_how_long_homing_may_take(capsys, monkeypatch, tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """A run homes a stage that is not homed before its first point: minutes on the rig,
+    said by the run only once it had started (the dry run's line left it out)."""
+    monkeypatch.setattr(eta_mod, "_model_compiled", lambda: True)
+    _, out = _dry_run_s(capsys, "smoke", "--bench", str(LAB_BENCH))
+    # the template's X-LSM500A: 500 mm at 25 mm/s
+    assert "the stage homes if it is not homed: at most 20 s (X-LSM500A: 500 mm at 25 mm/s" in out
+    slow = tmp_path / "slow_stage.yaml"
+    text = LAB_BENCH.read_text().replace("speed: 25 mm/s", "speed: 2 mm/s")
+    text = text.replace("  model: X-LSM500A", "  microstep: 0.047625 um\n  # model:")
+    slow.write_text(text)
+    _, out = _dry_run_s(capsys, "smoke", "--bench", str(slow))  # no model: the soft limit
+    assert "at most 4 min 0 s (the upper soft limit: 480 mm at 2 mm/s" in out
+    _, out = _dry_run_s(capsys, "smoke")  # the simulated bench waits for nothing
+    assert "homes" not in out
+
+
 def test_sim_bench_cost_counts_a_model_run_per_burst(monkeypatch) -> None:  # type: ignore[no-untyped-def]
     monkeypatch.setattr(eta_mod, "_model_compiled", lambda: True)
     bench = load_bench()

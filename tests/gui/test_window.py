@@ -177,6 +177,20 @@ def test_the_window_refuses_what_run_protocol_refuses_as_typed(
     assert not pp.valid and not window.start_run() and window.engine is None
 
 
+def test_dry_run_on_the_lab_bench_says_how_long_homing_may_take(
+    qtbot: Any, window: MainWindow
+) -> None:
+    """The window's Dry run says the stage's homing bound, as run_protocol's does."""
+    from protocols.bench import default_bench_path
+
+    assert window.load_bench(default_bench_path().with_name("lab_bench.yaml"))
+    qtbot.waitUntil(lambda: window.plan is not None, timeout=5000)
+    window.dry_run()
+    line = window.log_view.lines[-1]
+    assert "dry run: 6 points" in line, line
+    assert "homes if it is not homed: at most 20 s (X-LSM500A: 500 mm at 25 mm/s" in line, line
+
+
 def test_close_during_run_aborts_safely(qtbot: Any, tmp_path: Path) -> None:
     win = MainWindow(None, SMOKE, assembler=make_assembler(read_sleep_s=0.1))
     qtbot.addWidget(win)
