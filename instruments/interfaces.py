@@ -199,7 +199,13 @@ class Stage(Instrument, Protocol):
 
     def position(self) -> float: ...
 
-    def stop(self) -> None: ...
+    def stop(self) -> None:
+        """Start to decelerate the axis; returns at once."""
+        ...
+
+    def is_moving(self) -> bool:
+        """Whether the axis moves (decelerating after :meth:`stop` included)."""
+        ...
 
     def limits(self) -> tuple[float, float]:
         """(low, high) travel in m: device limits intersected with the bench's soft limits."""

@@ -61,6 +61,8 @@ SPEED_UNIT = 1.6384
 #: X-LSM and T-LSM: 0.047625 um per microstep at the default resolution 64 (datasheets).
 FULL_STEP_M: dict[str, float] = {"X-LSM": 0.047625e-6 * 64, "T-LSM": 0.047625e-6 * 64}
 _MODEL_RE = re.compile(r"^([A-Z]+-[A-Z]+?)(\d+)")
+#: a reply checksum (``comm.checksum 1``): a colon and two hex digits ending the line
+_CHECKSUM_RE = re.compile(r":[0-9A-Fa-f]{2}$")
 _REPLY_RE = re.compile(r"^@(\d+)\s+(\d+)\s+(?:(\d+)\s+)?(OK|RJ)\s+(IDLE|BUSY)\s+(\S\S)\s*(.*)$")
 #: names of the flags this driver reports (any other ``F*`` is a fault all the same)
 _FLAG_NAMES = {
@@ -173,6 +175,9 @@ class ZaberSettings:
         Added to distance / speed to get a move's timeout (s).
     home_timeout_s:
         Homing timeout (s).
+    stop_timeout_s:
+        How long :meth:`ZaberStage.safe_state` waits for the axis to come to rest after
+        ``stop`` (s): the manual's axis stays BUSY while it decelerates.
     position_tolerance_m:
         Largest |reached - target| accepted after a move (m).
     clock:
@@ -193,6 +198,7 @@ class ZaberSettings:
     poll_interval_s: float = 0.05
     timeout_margin_s: float = 5.0
     home_timeout_s: float = 120.0
+    stop_timeout_s: float = 5.0
     position_tolerance_m: float = 2.0e-6
     clock: Clock = field(default_factory=SystemClock, compare=False)
 
@@ -201,7 +207,7 @@ class ZaberSettings:
             math.isfinite(self.microstep_m) and self.microstep_m > 0
         ):
             raise LimitError(f"stage microstep_m must be > 0, got {self.microstep_m!r}")
-        for name in ("speed_m_per_s", "poll_interval_s", "home_timeout_s"):
+        for name in ("speed_m_per_s", "poll_interval_s", "home_timeout_s", "stop_timeout_s"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise LimitError(f"stage {name} must be > 0, got {value!r}")
@@ -253,6 +259,12 @@ class ZaberStage:
             if reply.startswith(("#", "!")):  # info and alert messages
                 reply = self.transport.read()
                 continue
+            if _CHECKSUM_RE.search(reply.strip()):
+                raise ReplyError(
+                    f"{self.transport.name}: the reply {reply!r} to {cmd!r} ends in a checksum "
+                    "(the device's comm.checksum is 1), which this driver does not read: set "
+                    "comm.checksum to 0 (Zaber Console, or '/1 set comm.checksum 0')"
+                )
             try:
                 r = parse_reply(reply)
             except ReplyError:
@@ -583,15 +595,33 @@ class ZaberStage:
                 return True
             if clock.now() > t_end:
                 self.stop()
+                stopped = "stopped" if self._wait_rest() else "stop sent, still moving"
                 raise InstrumentTimeout(
-                    f"{self.transport.name}: {what} not finished within {timeout_s:.3g} s; stopped"
+                    f"{self.transport.name}: {what} not finished within {timeout_s:.3g} s; "
+                    + stopped
                 )
             clock.sleep(self.settings.poll_interval_s)
 
     def stop(self) -> None:
-        """Decelerate to a stop (``stop``, no message id: any reply will do); flags not checked."""
+        """Decelerate to a stop (``stop``, no message id: any reply will do); flags not checked.
+        Returns at once: the axis is BUSY until it has decelerated (:meth:`is_moving`)."""
         s = self.settings
         self.transport.query(f"/{s.device} {s.axis} stop")
+
+    def is_moving(self) -> bool:
+        """Whether the axis is moving (``get pos`` answers BUSY), decelerating after a stop
+        included; flags not checked."""
+        return self.command("get pos", check_flags=False).busy
+
+    def _wait_rest(self) -> bool:
+        """Poll until the axis is at rest (True), for at most ``stop_timeout_s``."""
+        s = self.settings
+        t_end = s.clock.now() + s.stop_timeout_s
+        while self.is_moving():
+            if s.clock.now() > t_end:
+                return False
+            s.clock.sleep(s.poll_interval_s)
+        return True
 
     def clear_warnings(self) -> list[str]:
         """``warnings clear`` (after a handled stall/limit fault); the flags it cleared."""
@@ -622,9 +652,16 @@ class ZaberStage:
         return snap
 
     def safe_state(self) -> None:
-        """Stop; never raises."""
+        """Stop, and wait for the axis to come to rest (at most ``stop_timeout_s``); never
+        raises (a failure is logged; :meth:`is_moving` tells the caller what came of it)."""
         try:
             self.stop()
+            if not self._wait_rest():
+                log.warning(
+                    "%s: still moving %.3g s after 'stop'",
+                    self.transport.name,
+                    self.settings.stop_timeout_s,
+                )
         except Exception as exc:
             log.warning("%s: stop failed: %s", self.transport.name, exc)
 

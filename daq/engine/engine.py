@@ -337,7 +337,9 @@ class RunEngine:
         return f"generator ({where})" if where else "generator"
 
     def _safe_state(self) -> tuple[list[str], list[str]]:
-        """Every instrument's safe state, then the generator's outputs read back (``OUTPn?``).
+        """Every instrument's safe state, then the stage's motion and the generator's outputs
+        read back (``OUTPn?``). A stage still moving is unconfirmed; one that does not answer is
+        a problem only: a move ends by itself within the travel, an output stays on.
 
         Returns ``(problems, unconfirmed)``: problems met on the way (logged) and what could
         not be confirmed off, each naming the instrument and output (the run is then unsafe).
@@ -363,6 +365,11 @@ class RunEngine:
             except Exception as exc:
                 problems.append(f"{name} safe state: {exc}")
         unconfirmed: list[str] = []
+        try:  # the stage decelerates after its stop; its safe state waited for that
+            if self.instruments.stage.is_moving():
+                unconfirmed.append("stage controller: the axis still moves after 'stop'")
+        except Exception as exc:  # a silent stage ends its bounded move by itself
+            problems.append(f"stage: cannot read whether it stopped: {exc}")
         gname = self._generator_name()
         for ch in channels:
             if dead:

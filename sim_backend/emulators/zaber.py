@@ -8,7 +8,11 @@ and its id as firmware 7 names it (``get device.id``; ``deviceid`` is firmware 6
 rejected) unless ``firmware=6``. Warning flags: a reply shows the one of highest priority
 (faults, then warnings, then notices); ``warnings`` lists them all (``NN F1 F2``) and
 ``warnings clear`` clears those that are events (``FS`` stalled, ``WL`` unexpected limit,
-``NI``), not ``WR`` (no reference position), which only ``home`` clears.
+``NI``), not ``WR`` (no reference position), which only ``home`` clears. The manual: "All
+movement commands, including stop, put the axis into the BUSY state, while they are being
+executed", and ``NI`` flags a movement command that interrupted another: ``stop`` decelerates a
+moving axis at :attr:`ZaberEmulator.accel_m_per_s2` (this emulator's figure, not the
+datasheet's) and answers BUSY until it is at rest.
 Serial line as shipped: 115200 baud, 8N1 (:attr:`BAUD_RATE`).
 
 State for the world: :meth:`ZaberEmulator.position_m` (at the clock's time), :attr:`homed`,
@@ -52,6 +56,8 @@ class ZaberEmulator:
         speed_m_per_s: float = 0.025,
         home_position_m: float | None = None,
         firmware: int = 7,
+        accel_m_per_s2: float = 0.2,
+        checksum: bool = False,
     ) -> None:
         self.clock = clock
         self.device = device
@@ -62,6 +68,11 @@ class ZaberEmulator:
         microstep_m = full_step_m / self.resolution
         self.microstep_m = microstep_m
         self.late_replies = 0
+        #: deceleration after ``stop`` (m/s^2)
+        self.accel_m_per_s2 = float(accel_m_per_s2)
+        #: ``comm.checksum``: replies end in ``:CC``, the two's complement of the low byte of the
+        #: sum of the characters after ``@`` (the manual's longitudinal check)
+        self.checksum = bool(checksum)
         #: line speed (baud) the device listens at; 115200 as shipped
         self.baud_rate = BAUD_RATE
         self._held: list[str] = []
@@ -85,6 +96,7 @@ class ZaberEmulator:
         self._target = self._start
         self._t0 = 0.0
         self._t1 = 0.0
+        self._stopping = False  # the motion under way is the deceleration after a stop
         self.commands: list[str] = []
         self._id: int | None = None
 
@@ -142,9 +154,32 @@ class ZaberEmulator:
         here = round(self._steps_now())
         self._start = self._target = here
         self._t0 = self._t1 = self.clock.now()
+        self._stopping = False
+
+    def _decelerate(self) -> None:
+        """``stop`` on a moving axis: from its speed now to rest at :attr:`accel_m_per_s2`
+        (time v/a, distance v^2/2a, no farther than the move's target)."""
+        now = self.clock.now()
+        if now >= self._t1 or self._stopping:  # at rest, or decelerating already
+            return
+        here = self._steps_now()
+        speed = abs(self._target - self._start) / (self._t1 - self._t0)  # microsteps/s
+        accel = self.accel_m_per_s2 / self.microstep_m  # microsteps/s^2
+        left = abs(self._target - here)
+        way = min(speed * speed / (2.0 * accel), left)
+        direction = 1.0 if self._target > self._start else -1.0
+        self._start = round(here)
+        self._target = round(here + direction * way)
+        self._t0 = now
+        self._t1 = now + (2.0 * way / speed if speed > 0 else 0.0)  # mean speed v/2
+        self._stopping = True
+        self.flags.add("NI")
 
     def _go(self, target: int, maxspeed: int | None = None) -> None:
+        if self.busy():
+            self.flags.add("NI")  # a movement command interrupted another
         here = self._steps_now()
+        self._stopping = False
         speed = (self.maxspeed if maxspeed is None else maxspeed) / 1.6384  # microsteps/s
         self._start = round(here)
         self._target = target
@@ -156,7 +191,10 @@ class ZaberEmulator:
         status = "BUSY" if self.busy() else "IDLE"
         mid = "" if self._id is None else f"{self._id} "
         verdict = "OK" if ok else "RJ"
-        return f"@{self.device:02d} {self.axis} {mid}{verdict} {status} {self.flag} {data}"
+        line = f"@{self.device:02d} {self.axis} {mid}{verdict} {status} {self.flag} {data}"
+        if self.checksum:
+            line += f":{-sum(line[1:].encode('ascii')) & 0xFF:02X}"
+        return line
 
     def handle(self, message: bytes) -> str | None:
         """One request line in; the reply line(s) out (several when late ones arrive first)."""
@@ -201,7 +239,8 @@ class ZaberEmulator:
             self._homing = True
             return self._reply(True, "0")
         if cmd == "stop":
-            self._halt()
+            self._homing = False  # a home move stopped short: still no reference
+            self._decelerate()
             return self._reply(True, "0")
         if cmd == "warnings" and words[1:] in ([], ["clear"]):
             self._homing_done()
@@ -233,6 +272,7 @@ class ZaberEmulator:
                 "device.id" if self.firmware >= 7 else "deviceid": self.device_id,
                 "version": "7.29" if self.firmware >= 7 else "6.28",
                 "resolution": self.resolution,
+                "comm.checksum": int(self.checksum),
             }.get(words[1])
             if value is None:
                 return self._reply(False, "BADCOMMAND")

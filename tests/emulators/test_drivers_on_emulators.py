@@ -245,6 +245,8 @@ def test_homing_shows_wr_until_it_ends_and_a_cancel_stops_it(clock: SimClock) ->
             return self.n < 0
 
     stage.home(cancel=AfterPolls(3))
+    assert emu.busy() and "NI" in emu.flags  # decelerating after the stop; it interrupted
+    stage.safe_state()  # waits for the axis to come to rest
     assert not emu.busy() and not emu.homed and "WR" in emu.flags
     assert not stage.is_homed() and clock.now() < 10  # stopped within a few polls
     emu.handle(b"/1 1 home")
@@ -253,13 +255,44 @@ def test_homing_shows_wr_until_it_ends_and_a_cancel_stops_it(clock: SimClock) ->
     assert emu.homed and stage.is_homed()
 
 
+def test_stop_decelerates_busy_and_safe_state_waits_for_rest(clock: SimClock) -> None:
+    """The manual: "All movement commands, including stop, put the axis into the BUSY state,
+    while they are being executed"; NI flags a move that another command interrupted. The
+    emulator stopped the axis dead and answered IDLE, and the driver's safe state returned
+    at once: a stage still decelerating read as safe."""
+    stage, emu = make_stage(clock)
+    stage.home()
+    stage.command(f"move abs {round(0.2 / emu.microstep_m)}")  # 25 mm/s, not waited for
+    clock.sleep(1.0)
+    here = emu.position_m()
+    reply = stage.transport.query("/1 1 stop")
+    assert " OK BUSY NI " in reply  # decelerating; the move was interrupted
+    v, a = 0.025, emu.accel_m_per_s2
+    t0 = clock.now()
+    stage.safe_state()
+    assert not emu.busy() and not stage.is_moving()
+    assert clock.now() - t0 == pytest.approx(v / a, abs=0.06)  # polled every 50 ms
+    assert emu.position_m() - here == pytest.approx(v * v / (2 * a), abs=1e-6)
+    assert stage.is_homed()  # a stopped move keeps the reference
+
+
+def test_a_stage_whose_replies_carry_checksums_is_refused_in_one_line(clock: SimClock) -> None:
+    """``comm.checksum 1`` ends every reply in ``:CC``; the driver read '0:4F' as the data and
+    failed on it as a malformed number, naming nothing that would help."""
+    stage, emu = make_stage(clock)
+    emu.checksum = True
+    with pytest.raises(ReplyError, match=r"ends in a checksum .*comm\.checksum to 0"):
+        stage.connect()
+    assert not any(c.split()[2:3] in (["move"], ["home"]) for c in emu.commands)
+
+
 def test_stage_move_timeout_stops_axis(clock: SimClock) -> None:
     stage, emu = make_stage(clock, timeout_margin_s=0.0)
     stage.home()
     emu.maxspeed = 1  # far slower than the driver believes
-    with pytest.raises(InstrumentTimeout, match="not finished"):
+    with pytest.raises(InstrumentTimeout, match=r"not finished.*; stopped$"):
         stage.move_to(0.1)
-    assert not emu.busy()
+    assert not emu.busy()  # "stopped" is said once the axis is at rest
 
 
 EIGHT_POINTS = bytes(16)  # 8 DAC codes of 0, the emulator's minimum

@@ -32,6 +32,7 @@ class Faults:
     clip: bool = False
     generator_dead_after_reads: int | None = None  # the generator stops answering after N reads
     home_s: float = 0.0  # wall time homing takes (a cancel ends it, not homed)
+    stage_keeps_moving: bool = False  # the axis still moves after stop (a controller fault)
 
 
 @dataclass
@@ -173,6 +174,9 @@ class FakeStage:
 
     def stop(self) -> None:
         pass
+
+    def is_moving(self) -> bool:
+        return self.w.faults.stage_keeps_moving
 
     def limits(self) -> tuple[float, float]:
         return (0.0, 0.5)

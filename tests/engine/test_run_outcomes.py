@@ -85,6 +85,16 @@ def test_the_safe_state_is_confirmed_by_reading_the_outputs_back(protocol, bench
     assert any("safe state confirmed" in m for _, _, m in read_run(out).log)
 
 
+def test_a_stage_still_moving_after_stop_is_an_unconfirmed_safe_state(protocol, bench, out) -> None:
+    """The safe state asks the stage whether its axis came to rest (Zaber: BUSY while it
+    decelerates); before, only the generator's outputs were read back."""
+    w = FakeWorld(faults=Faults(stage_keeps_moving=True))
+    res = RunEngine(protocol, bench, fake_bench(w), out).run()
+    assert res.status == "unsafe" and res.safe_state_s is None
+    assert res.unconfirmed == ("stage controller: the axis still moves after 'stop'",)
+    assert any("SWITCH OFF BY HAND: stage controller" in m for _, _, m in read_run(out).log)
+
+
 # -- failed points ---------------------------------------------------------------------------
 def test_failed_points_are_exit_4_and_a_resume_remeasures_them(
     proto_file, tmp_path, capsys, monkeypatch

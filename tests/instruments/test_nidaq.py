@@ -213,7 +213,8 @@ def test_the_bench_file_sets_terminal_config_and_rate_ceiling(
     text = (default_bench_path().parent / "lab_bench.yaml").read_text()
     assert "terminal_config: differential" in text
     text = text.replace("terminal_config: differential", "terminal_config: RSE")
-    text = text.replace("max_rate: 2 MS/s", "max_rate: 250 kS/s")
+    assert "max_rate: 500 kS/s" in text
+    text = text.replace("max_rate: 500 kS/s", "max_rate: 250 kS/s")
     bench = connect_bench(parse_bench(text))
     dig = bench.digitiser
     assert dig.snapshot()["terminal_config"] == "RSE"

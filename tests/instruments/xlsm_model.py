@@ -8,7 +8,9 @@ the reply is ``@<device as 2 digits> <axis> [<id>] <OK|RJ> <IDLE|BUSY> <warning 
 flags as a two-digit count and the flags (``01 WR``). Firmware 7 names the id setting
 ``device.id`` (firmware 6: ``deviceid``). Positions, limits and speeds are
 in microsteps; resolution 64 microsteps per step by default. Datasheet: X-LSM microstep
-0.047625 um (at 64), travel 500 mm. A move reports BUSY for one status request, then IDLE.
+0.047625 um (at 64), travel 500 mm. A move reports BUSY for one status request, then IDLE;
+"all movement commands, including stop, put the axis into the BUSY state, while they are being
+executed".
 """
 
 from __future__ import annotations
@@ -74,8 +76,8 @@ class XLSM500A:
             return self._answer(mid, True, "0")
         if words == ["warnings"]:
             return self._answer(mid, True, "00" if self.homed else "01 WR")
-        if words == ["stop"]:
-            self.busy_polls = 0
+        if words == ["stop"]:  # a moving axis decelerates: BUSY for one status request more
+            self.busy_polls = 2 if self.busy_polls > 0 else 0
             return self._answer(mid, True, "0")
         if words[:2] == ["move", "abs"] and len(words) == 3:
             target = int(words[2])
