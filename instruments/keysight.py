@@ -47,7 +47,7 @@ from instruments.errors import InstrumentError, InstrumentTimeout, LimitError, R
 from instruments.interfaces import BurstConfig, Transport
 from instruments.keysight_readback import ChannelReadback, ChannelRequest, read_channel
 
-__all__ = ["DAC_FULL_SCALE", "GeneratorLimits", "KeysightGenerator", "dac_codes"]
+__all__ = ["DAC_FULL_SCALE", "GeneratorLimits", "KeysightGenerator", "arb_peak_factor", "dac_codes"]
 
 log = logging.getLogger(__name__)
 
@@ -102,8 +102,10 @@ class GeneratorLimits:
         """Largest |V| at the generator terminals allowed by both limits."""
         return min(0.5 * self.max_amplitude_Vpp, self.max_piezo_V / self.amplifier_gain)
 
-    def check(self, config: BurstConfig) -> None:
-        """Raise :class:`LimitError` (numbers in the message) if ``config`` breaks a limit."""
+    def check(self, config: BurstConfig, peak_factor: float = 1.0) -> None:
+        """Raise :class:`LimitError` (numbers in the message) if ``config`` breaks a limit;
+        ``peak_factor``: the waveform's :func:`arb_peak_factor` (the piezo's peak is taken as
+        ``amplitude_Vpp / 2 x peak_factor + |offset|`` at the generator)."""
         if config.amplitude_Vpp < self.min_amplitude_Vpp:
             raise LimitError(
                 f"generator amplitude {config.amplitude_Vpp:g} Vpp is below the generator "
@@ -115,17 +117,42 @@ class GeneratorLimits:
                 f"{config.offset_V:g} V exceeds the generator maximum "
                 f"{self.max_amplitude_Vpp:g} Vpp at high-Z load"
             )
-        piezo_V = config.peak_V * self.amplifier_gain
-        if piezo_V > self.max_piezo_V:
+        peak_V = 0.5 * config.amplitude_Vpp * peak_factor + abs(config.offset_V)
+        piezo_V = peak_V * self.amplifier_gain
+        if piezo_V > self.max_piezo_V * (1 + 1e-12):
+            unequal = (
+                f"; the waveform's peaks are unequal, so it may reach x{peak_factor:.4g} of "
+                "half its Vpp"
+                if peak_factor > 1.0 + 1e-9
+                else ""
+            )
             raise LimitError(
-                f"peak at the piezo {piezo_V:g} V (generator peak {config.peak_V:g} V x gain "
-                f"{self.amplifier_gain:g}) exceeds the piezo limit {self.max_piezo_V:g} V"
+                f"peak at the piezo {piezo_V:g} V (generator peak {peak_V:g} V x gain "
+                f"{self.amplifier_gain:g}) exceeds the piezo limit {self.max_piezo_V:g} V" + unequal
             )
         if config.sample_rate_Hz > self.max_sample_rate_Hz:
             raise LimitError(
                 f"arb sample rate {config.sample_rate_Hz:g} Sa/s exceeds the generator maximum "
                 f"{self.max_sample_rate_Hz:g} Sa/s"
             )
+
+
+def arb_peak_factor(samples: NDArray[np.float64]) -> float:
+    """The largest |output| of arbitrary data ``samples`` ``[n]`` (in [-1, 1]) in units of half
+    the amplitude setting (VOLT/2), under either reading of how the 33500/33600 scales VOLT on
+    arb data; no Keysight text found settles which (docs/instruments.md): the DAC's full
+    scale at +-VOLT/2 (factor ``max|x|``, at most 1), or the data's own peak-to-peak at VOLT
+    (factor ``2 max|x| / (max x - min x)``: 1 for data whose peaks are equal, 1.005 for the
+    shipped narrowband bursts, 1.09 for a five-cycle one). The piezo limit is checked with the
+    larger; 1 for data of fewer than two distinct values."""
+    x = np.asarray(samples, dtype=np.float64)
+    if x.size == 0 or not np.all(np.isfinite(x)):
+        return 1.0
+    top, bottom = float(np.max(x)), float(np.min(x))
+    peak = max(abs(top), abs(bottom))
+    if top - bottom <= 0.0:
+        return max(peak, 1.0) if peak > 0 else 1.0
+    return max(peak, 2.0 * peak / (top - bottom))
 
 
 def dac_codes(samples: NDArray[np.float64]) -> NDArray[np.int16]:
@@ -277,13 +304,13 @@ class KeysightGenerator:
         ``k / sample_rate_Hz`` s. Every setting is read back and compared
         (:mod:`instruments.keysight_readback`: the rate to 1e-6, voltages to 0.1 % + 0.1 mV)."""
         self._check_channel(channel)
-        self.limits.check(config)
+        codes = dac_codes(samples)  # finite and normalised, before the limits read them
+        self.limits.check(config, peak_factor=arb_peak_factor(samples))
         rate = float(config.sample_rate_Hz if sample_rate_Hz is None else sample_rate_Hz)
         if not (math.isfinite(rate) and 0 < rate <= self.limits.max_sample_rate_Hz):
             raise LimitError(
                 f"arb sample rate {rate:g} Sa/s outside (0, {self.limits.max_sample_rate_Hz:g}]"
             )
-        codes = dac_codes(samples)
         if not 8 <= codes.size <= self.limits.max_points:
             raise LimitError(
                 f"waveform has {codes.size} samples; the generator takes "

@@ -149,12 +149,20 @@ MAX_RUN_BYTES = 2 * 2**30
 def _check_amplitudes(pf: ProtocolFile, bf: BenchFile, vpp: NDArray[np.float64]) -> None:
     """Each amplitude within the generator's and the piezo's limits, said in the unit the
     protocol used (Vpp, Vpk or a displacement) and naming the bench field that binds."""
+    from instruments.burst import burst_samples
+    from instruments.keysight import arb_peak_factor
     from protocols.schema import amplitude_notation
 
     bench = bf.bench
     amp = bench.amplifier
     gen_max = bench.generator.max_amplitude
-    piezo_vpp = 2.0 * amp.piezo_max / amp.gain
+    # the generator may scale its amplitude to a burst's own peak-to-peak: a burst whose
+    # peaks are unequal may then reach a little more than half its Vpp (as the driver checks)
+    factor = max(
+        arb_peak_factor(burst_samples(pf.protocol.burst[d].burst(), bench.generator.sample_rate))
+        for d in pf.protocol.direction_list
+    )
+    piezo_vpp = 2.0 * amp.piezo_max / amp.gain / factor
     max_vpp = min(gen_max, piezo_vpp)
     bench_name = Path(bf.doc.source).name
     written = pf.protocol.amplitudes
@@ -184,9 +192,15 @@ def _check_amplitudes(pf: ProtocolFile, bf: BenchFile, vpp: NDArray[np.float64])
                 f"{gen_max:.4g} Vpp ({bench_name})"
             )
         else:
+            unequal = (
+                f"; the burst's peaks are unequal, so it may reach x{factor:.4g} of half its Vpp"
+                if factor > 1.0 + 1e-9
+                else ""
+            )
             why = (
-                f"it gives {0.5 * v * amp.gain:.4g} V at the piezo, above amplifier.piezo_max "
-                f"{amp.piezo_max:.4g} V ({bench_name}, at gain {amp.gain:.4g})"
+                f"it gives up to {0.5 * v * factor * amp.gain:.4g} V at the piezo, above "
+                f"amplifier.piezo_max {amp.piezo_max:.4g} V ({bench_name}, at gain "
+                f"{amp.gain:.4g}){unequal}"
             )
         raise pf.error(
             ("amplitudes",),

@@ -10,7 +10,7 @@ import pytest
 from instruments.burst import Burst, burst_samples
 from instruments.errors import InstrumentTimeout, LimitError, ReplyError
 from instruments.interfaces import BurstConfig
-from instruments.keysight import GeneratorLimits, KeysightGenerator, dac_codes
+from instruments.keysight import GeneratorLimits, KeysightGenerator, arb_peak_factor, dac_codes
 from instruments.transport import ScriptedTransport
 
 LIMITS = GeneratorLimits(max_piezo_V=150.0, amplifier_gain=20.0, max_amplitude_Vpp=10.0)
@@ -158,6 +158,24 @@ def test_limits_refused_before_sending(config: BurstConfig, pattern: str) -> Non
     t = ScriptedTransport([])
     with pytest.raises(LimitError, match=pattern):
         KeysightGenerator(t, limits).configure_burst(1, config)
+    assert t.sent == [] and t.blocks == []
+
+
+def test_unequal_peaks_are_checked_at_the_larger_reading_of_the_amplitude() -> None:
+    """No Keysight text settles whether VOLT sets the DAC's full scale (+1 -> VOLT/2) or the arb
+    data's own peak-to-peak; under the second, data from -0.5 to +1 peaks at 2/3 VOLT, not
+    VOLT/2. The piezo limit was checked at VOLT/2 only: 7.2 Vpp passed a 75 V limit at gain
+    20 (72 V under the first reading, 96 V under the second)."""
+    assert arb_peak_factor(np.array([0.0, 1.0, -1.0, 0.0])) == 1.0
+    assert arb_peak_factor(np.array([0.0, 1.0, -0.5, 0.0])) == pytest.approx(4 / 3)
+    assert arb_peak_factor(np.array([0.0, 1.0, 0.5, 0.0])) == pytest.approx(2.0)
+    assert arb_peak_factor(burst_samples(CFG.shape, 1e6)) == pytest.approx(1.088, abs=1e-3)
+    wave = np.concatenate([np.zeros(4), np.linspace(-0.5, 1.0, 64), np.zeros(4)])
+    limits = GeneratorLimits(max_piezo_V=75.0, amplifier_gain=20.0, max_amplitude_Vpp=10.0)
+    cfg = BurstConfig(Burst(8920.0), amplitude_Vpp=7.2)
+    t = ScriptedTransport([])
+    with pytest.raises(LimitError, match=r"piezo 96 V .*peaks are unequal, .* x1\.333"):
+        KeysightGenerator(t, limits).configure_waveform(1, wave, cfg)
     assert t.sent == [] and t.blocks == []
 
 
