@@ -304,6 +304,12 @@ class KeysightGenerator:
         ``k / sample_rate_Hz`` s. Every setting is read back and compared
         (:mod:`instruments.keysight_readback`: the rate to 1e-6, voltages to 0.1 % + 0.1 mV)."""
         self._check_channel(channel)
+        if config.trigger_source == "external":
+            raise LimitError(
+                f"{self.transport.name}: trigger source 'external' turns off the trigger out that "
+                "starts the digitiser (the guide: 'With TRIGger[1|2]:SOURce EXTernal, instrument "
+                "disables the \"trigger out\" signal'); use 'bus' or 'immediate'"
+            )
         codes = dac_codes(samples)  # finite and normalised, before the limits read them
         self.limits.check(config, peak_factor=arb_peak_factor(samples))
         rate = float(config.sample_rate_Hz if sample_rate_Hz is None else sample_rate_Hz)

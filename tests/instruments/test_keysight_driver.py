@@ -179,6 +179,17 @@ def test_unequal_peaks_are_checked_at_the_larger_reading_of_the_amplitude() -> N
     assert t.sent == [] and t.blocks == []
 
 
+def test_an_external_trigger_is_refused_before_sending() -> None:
+    """The guide: an external trigger source disables the trigger out, which starts the
+    digitiser; the driver sent OUTP:TRIG ON beside it, read it back as 1, and every record
+    would have waited for a trigger that never came."""
+    t = ScriptedTransport([])
+    cfg = BurstConfig(Burst(8920.0), amplitude_Vpp=1.0, trigger_source="external")
+    with pytest.raises(LimitError, match="'external' turns off the trigger out"):
+        KeysightGenerator(t, LIMITS).configure_burst(1, cfg)
+    assert t.sent == [] and t.blocks == []
+
+
 def test_nan_waveform_refused_before_sending() -> None:
     wave = np.zeros(64)
     wave[10] = math.nan
