@@ -53,6 +53,10 @@ class ProgressDisplay:
     ``update(done, detail=..., eta_s=...)`` moves it; ``note(text)`` prints a line above a live
     bar (warnings); ``close()`` (or leaving the ``with`` block) ends the bar. ``live``: force
     (True) or forbid (False) the live bar; default: a live bar when ``stream`` is a terminal.
+
+    The rate is counted from the first finished item on, once a second one is done: what comes
+    before it (homing, compiling the model, starting a study's workers) is paid once, and
+    read "15.4 s/point" on the simulated bench's first run, where the points took 0.02 s.
     """
 
     def __init__(
@@ -78,6 +82,8 @@ class ProgressDisplay:
         self.done = start_done
         self._start_done = start_done
         self._t0 = time.monotonic()
+        #: (time, done) at the first update that finished an item: the steady rate's start
+        self._first: tuple[float, int] | None = None
         self._last_plain = -math.inf
         self._progress: Any = None
         self._task: Any = None
@@ -113,13 +119,20 @@ class ProgressDisplay:
         self._progress.start()
 
     # -- the caller's side -----------------------------------------------------------------
+    def _counted(self) -> tuple[int, float]:
+        """(items, seconds) the rate is measured over: from the first finished item on once
+        there are more, else from the start."""
+        now = time.monotonic()
+        if self._first is not None and self.done > self._first[1]:
+            return self.done - self._first[1], now - self._first[0]
+        return self.done - self._start_done, now - self._t0
+
     def rate_text(self) -> str:
-        return format_rate(self.done - self._start_done, time.monotonic() - self._t0, self.unit)
+        return format_rate(*self._counted(), self.unit)
 
     def eta_from_rate(self) -> float:
-        """Seconds left at the rate measured since the display started (inf before any)."""
-        n = self.done - self._start_done
-        dt = time.monotonic() - self._t0
+        """Seconds left at the measured rate (:meth:`_counted`; inf before any item)."""
+        n, dt = self._counted()
         if n <= 0 or dt <= 0:
             return math.inf
         return (self.total - self.done) * dt / n
@@ -128,6 +141,8 @@ class ProgressDisplay:
         """``done`` of ``total`` finished; ``detail`` says which; ``eta_s``: the time left when
         the caller knows it better than the rate (else it follows from the rate)."""
         self.done = int(done)
+        if self._first is None and self.done > self._start_done:
+            self._first = (time.monotonic(), self.done)
         if self.quiet or self._closed:
             return
         eta = format_duration(self.eta_from_rate() if eta_s is None else eta_s)

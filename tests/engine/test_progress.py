@@ -47,6 +47,28 @@ def test_live_bar_on_a_terminal() -> None:
     assert "ETA" in text and "warning: something" in text
 
 
+def test_the_rate_leaves_out_what_came_before_the_first_item(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The first point carries homing and the model's compile: 15 s, then 0.1 s a point. The
+    rate read from the start said 3.1 s/point after 5 points (and ETA from it 10x too long);
+    it now reads 10 points/s from the first point on."""
+    import daq.progress
+
+    now = [100.0]
+    monkeypatch.setattr(daq.progress.time, "monotonic", lambda: now[0])
+    s = io.StringIO()
+    with ProgressDisplay(10, stream=s, plain_every_s=0.0) as p:
+        now[0] += 15.0
+        p.update(1)
+        assert p.rate_text() == "15 s/point"  # one point: all there is to go on
+        for k in range(2, 6):
+            now[0] += 0.1
+            p.update(k)
+        assert p.rate_text() == "10 points/s"
+        assert p.eta_from_rate() == pytest.approx(0.5)
+
+
 def test_quiet_prints_nothing() -> None:
     s = Tty()
     with ProgressDisplay(2, stream=s, quiet=True) as p:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import gc
 import os
+import threading
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -52,9 +53,15 @@ class SlowDigitiser:
     def __init__(self, inner: Any, read_sleep_s: float) -> None:
         self._inner = inner
         self._sleep = read_sleep_s
+        #: set while a read sleeps (a test that needs the run mid-read waits for it)
+        self.reading = threading.Event()
 
     def read(self) -> Any:
-        time.sleep(self._sleep)
+        self.reading.set()
+        try:
+            time.sleep(self._sleep)
+        finally:
+            self.reading.clear()
         return self._inner.read()
 
     def __getattr__(self, name: str) -> Any:

@@ -19,7 +19,7 @@ import pytest
 
 from protocols.runfile import read_run
 
-from .conftest import RUN_AT_ONCE_SCRIPT, running_window, wait_first_point
+from .conftest import RUN_AT_ONCE_SCRIPT, running_window, wait_first_point, wait_until
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -121,6 +121,9 @@ def test_a_run_that_does_not_end_after_the_abort_is_not_called_safe(
     win = running_window(qtbot, tmp_path / "slow.h5", read_sleep_s=3.0)
     monkeypatch.setattr(main_window, "CLOSE_WAIT_S", 0.2)
     engine = win.engine
+    # mid-read: between two points the abort ends the run at once (under load the window
+    # saw the first point while the engine was still before the second read: exit 1)
+    wait_until(qtbot, engine.instruments.digitiser.reading.is_set, timeout_s=30)
     win.stop_signal(signal.SIGTERM)
     assert win.exit_status == 3  # unsafe: nothing confirmed the outputs off
     assert "its safe state is not confirmed" in "\n".join(win.log_view.lines)
