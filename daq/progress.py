@@ -23,8 +23,11 @@ __all__ = ["ProgressDisplay", "format_duration", "format_minutes", "format_rate"
 
 
 def format_minutes(seconds: float) -> str:
-    """``"2 min 30 s"`` or ``"45 s"`` (whole seconds): a bound said in words, as the homing's."""
-    minutes, s = divmod(round(max(0.0, seconds)), 60)
+    """``"2 min 30 s"`` or ``"45 s"``: an upper bound said in words (rounded up to the whole
+    second, past 10 ms), as the homing's; ``"an unknown time"`` when not finite."""
+    if not math.isfinite(seconds):
+        return "an unknown time"
+    minutes, s = divmod(math.ceil(round(max(0.0, seconds), 2)), 60)
     return f"{minutes} min {s} s" if minutes else f"{s} s"
 
 

@@ -94,14 +94,17 @@ class BurstConfig:
     shape:
         The burst shape (centre frequency, cycles or width), normalised to peak 1.
     amplitude_Vpp:
-        Generator output, peak-to-peak volts, at the output-load setting. The burst's peak
-        voltage at the generator terminals is ``amplitude_Vpp / 2``.
+        Generator amplitude setting, peak-to-peak volts, at the output-load setting. A burst
+        normalised to peak 1 peaks at ``amplitude_Vpp / 2`` if the generator maps its DAC's
+        full scale to it, and up to ``arb_peak_factor`` times that if it maps the data's own
+        peak-to-peak (``instruments.keysight``: the limits are checked at the larger).
     sample_rate_Hz:
         Arbitrary-waveform sample rate in Sa/s.
     offset_V:
         DC offset in volts.
     trigger_source:
-        ``"bus"`` (``*TRG``), ``"external"`` or ``"immediate"``.
+        ``"bus"`` (``*TRG``), ``"external"`` or ``"immediate"`` (the Keysight driver refuses
+        ``"external"``: it turns off the trigger out that starts the digitiser).
     """
 
     shape: Burst
@@ -119,11 +122,6 @@ class BurstConfig:
             raise LimitError(f"burst amplitude must be > 0 Vpp, got {self.amplitude_Vpp!r}")
         if self.sample_rate_Hz <= 0:
             raise LimitError(f"burst sample rate must be > 0 Sa/s, got {self.sample_rate_Hz!r}")
-
-    @property
-    def peak_V(self) -> float:
-        """Largest |voltage| at the generator terminals (V)."""
-        return 0.5 * self.amplitude_Vpp + abs(self.offset_V)
 
 
 @runtime_checkable

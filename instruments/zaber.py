@@ -238,6 +238,7 @@ class ZaberStage:
         self._next_id = 0
         #: a stall or limit warning was cleared at connect: home before the next move
         self._must_home = False
+        self._stop_unanswered = False  # the last safe state's stop got no reply
 
     # --- wire ---------------------------------------------------------------------------
     def _message_id(self) -> int:
@@ -610,7 +611,10 @@ class ZaberStage:
 
     def is_moving(self) -> bool:
         """Whether the axis is moving (``get pos`` answers BUSY), decelerating after a stop
-        included; flags not checked."""
+        included; flags not checked. After a :meth:`safe_state` whose ``stop`` got no reply it
+        raises :class:`InstrumentTimeout` at once (the link is dead: not another timeout)."""
+        if self._stop_unanswered:
+            raise InstrumentTimeout(f"{self.transport.name}: no reply to 'stop'")
         return self.command("get pos", check_flags=False).busy
 
     def _wait_rest(self) -> bool:
@@ -654,6 +658,7 @@ class ZaberStage:
     def safe_state(self) -> None:
         """Stop, and wait for the axis to come to rest (at most ``stop_timeout_s``); never
         raises (a failure is logged; :meth:`is_moving` tells the caller what came of it)."""
+        self._stop_unanswered = False
         try:
             self.stop()
             if not self._wait_rest():
@@ -663,6 +668,7 @@ class ZaberStage:
                     self.settings.stop_timeout_s,
                 )
         except Exception as exc:
+            self._stop_unanswered = isinstance(exc, InstrumentTimeout)
             log.warning("%s: stop failed: %s", self.transport.name, exc)
 
     def close(self) -> None:

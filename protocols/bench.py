@@ -362,8 +362,10 @@ class BenchSpec(_Model):
             return amplitude
         return 2.0 * amplitude * self.generator_V_per_m
 
-    def amplitude_limit_error(self, vpp: float) -> str | None:
-        """Why ``vpp`` (generator Vpp) is not allowed on this bench, or ``None``."""
+    def amplitude_limit_error(self, vpp: float, peak_factor: float = 1.0) -> str | None:
+        """Why ``vpp`` (generator Vpp) is not allowed on this bench, or ``None``;
+        ``peak_factor``: the waveform's ``instruments.keysight.arb_peak_factor`` (its peak at
+        the piezo is taken as ``vpp / 2 x peak_factor x gain``, as the driver checks it)."""
         from instruments.keysight import GeneratorLimits
 
         if not math.isfinite(vpp) or vpp <= 0:
@@ -375,11 +377,17 @@ class BenchSpec(_Model):
             return (
                 f"{vpp:.4g} Vpp is above the generator limit {self.generator.max_amplitude:.4g} Vpp"
             )
-        piezo_V = 0.5 * vpp * self.amplifier.gain
+        piezo_V = 0.5 * vpp * peak_factor * self.amplifier.gain
         if piezo_V > self.amplifier.piezo_max * (1 + 1e-12):
+            unequal = (
+                f" (the burst's peaks are unequal, so it may reach x{peak_factor:.4g} of half "
+                "its Vpp)"
+                if peak_factor > 1.0 + 1e-9
+                else ""
+            )
             return (
-                f"{vpp:.4g} Vpp gives {piezo_V:.4g} V at the piezo, above its limit "
-                f"{self.amplifier.piezo_max:.4g} V"
+                f"{vpp:.4g} Vpp gives up to {piezo_V:.4g} V at the piezo, above its limit "
+                f"{self.amplifier.piezo_max:.4g} V{unequal}"
             )
         return None
 

@@ -89,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
             )
         f_c = 8.92e3 if args.direction == "ltr" else 6.63e3
         test = preflight.BurstTest(args.direction, args.cylinder, f_c, amplitude_Vpp=vpp)
-        why = bf.bench.amplitude_limit_error(vpp)
+        why = bf.bench.amplitude_limit_error(vpp, preflight.burst_peak_factor(bf, test))
         if why is not None:
             raise CliError(f"--amplitude: {why}")
         if not 1 <= args.cylinder <= bf.bench.n_cylinders:

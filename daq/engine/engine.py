@@ -365,11 +365,6 @@ class RunEngine:
             except Exception as exc:
                 problems.append(f"{name} safe state: {exc}")
         unconfirmed: list[str] = []
-        try:  # the stage decelerates after its stop; its safe state waited for that
-            if self.instruments.stage.is_moving():
-                unconfirmed.append("stage controller: the axis still moves after 'stop'")
-        except Exception as exc:  # a silent stage ends its bounded move by itself
-            problems.append(f"stage: cannot read whether it stopped: {exc}")
         gname = self._generator_name()
         for ch in channels:
             if dead:
@@ -383,6 +378,11 @@ class RunEngine:
                 continue
             if on:
                 unconfirmed.append(f"{gname} output {ch}: still ON after OUTP{ch} OFF")
+        try:  # after the outputs: the stage decelerates after its stop (its safe state waited)
+            if self.instruments.stage.is_moving():
+                unconfirmed.append("stage controller: the axis still moves after 'stop'")
+        except Exception as exc:  # a silent stage ends its bounded move by itself
+            problems.append(f"stage: cannot read whether it stopped: {exc}")
         return problems, unconfirmed
 
     # -- the run ---------------------------------------------------------------------------

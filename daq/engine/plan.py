@@ -158,10 +158,13 @@ def _check_amplitudes(pf: ProtocolFile, bf: BenchFile, vpp: NDArray[np.float64])
     gen_max = bench.generator.max_amplitude
     # the generator may scale its amplitude to a burst's own peak-to-peak: a burst whose
     # peaks are unequal may then reach a little more than half its Vpp (as the driver checks)
-    factor = max(
-        arb_peak_factor(burst_samples(pf.protocol.burst[d].burst(), bench.generator.sample_rate))
-        for d in pf.protocol.direction_list
-    )
+    rate = bench.generator.sample_rate
+    limits = _generator_limits(bf)
+    factor = 1.0
+    for d in pf.protocol.direction_list:
+        burst = pf.protocol.burst[d].burst()
+        if burst.duration_s * rate + 1 <= limits.max_points:  # longer ones are refused later
+            factor = max(factor, arb_peak_factor(burst_samples(burst, rate)))
     piezo_vpp = 2.0 * amp.piezo_max / amp.gain / factor
     max_vpp = min(gen_max, piezo_vpp)
     bench_name = Path(bf.doc.source).name
@@ -174,7 +177,7 @@ def _check_amplitudes(pf: ProtocolFile, bf: BenchFile, vpp: NDArray[np.float64])
             return format_quantity(vpp_ / (2.0 * bench.generator_V_per_m), "length")
         return f"{vpp_ / 2:.4g} Vpk" if notation == "Vpk" else f"{vpp_:.4g} Vpp"
 
-    min_vpp = _generator_limits(bf).min_amplitude_Vpp
+    min_vpp = limits.min_amplitude_Vpp
     for i, v in enumerate(vpp):
         if v < min_vpp * (1 - 1e-12):
             raise pf.error(

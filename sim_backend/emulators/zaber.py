@@ -239,7 +239,8 @@ class ZaberEmulator:
             self._homing = True
             return self._reply(True, "0")
         if cmd == "stop":
-            self._homing = False  # a home move stopped short: still no reference
+            self._homing_done()  # a home move that has ended keeps its reference
+            self._homing = False  # one stopped short: still no reference
             self._decelerate()
             return self._reply(True, "0")
         if cmd == "warnings" and words[1:] in ([], ["clear"]):

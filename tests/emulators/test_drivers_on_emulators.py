@@ -276,6 +276,39 @@ def test_stop_decelerates_busy_and_safe_state_waits_for_rest(clock: SimClock) ->
     assert stage.is_homed()  # a stopped move keeps the reference
 
 
+def test_a_stage_still_moving_after_the_bound_or_silent_is_said_so(
+    clock: SimClock, caplog: pytest.LogCaptureFixture
+) -> None:
+    """The safe state's wait is bounded (stop_timeout_s); an axis still decelerating after it
+    reads as moving. A stage that did not answer its stop is not asked again (a second
+    timeout would hold up the end of the run): is_moving raises at once."""
+    stage, emu = make_stage(clock, stop_timeout_s=1.0)
+    stage.home()
+    emu.accel_m_per_s2 = 1e-3  # 12.5 s to stop from 25 mm/s
+    stage.command(f"move abs {round(0.2 / emu.microstep_m)}")
+    clock.sleep(1.0)
+    t0 = clock.now()
+    stage.safe_state()
+    assert 1.0 <= clock.now() - t0 <= 1.1
+    assert stage.is_moving() and "still moving" in caplog.text
+    emu.responsive = False
+    stage.safe_state()
+    sent = len(emu.commands)
+    with pytest.raises(InstrumentTimeout, match="no reply to 'stop'"):
+        stage.is_moving()
+    assert len(emu.commands) == sent  # nothing sent: the link is known dead
+
+
+def test_a_stop_after_the_homing_ended_keeps_the_reference(clock: SimClock) -> None:
+    """The home move ends, then a stop arrives before any status request: the emulator kept
+    WR (no reference) for ever, as if the homing had been cut short."""
+    _, emu = make_stage(clock)
+    emu.handle(b"/1 1 home")
+    clock.sleep(60.0)
+    emu.handle(b"/1 1 stop")
+    assert emu.homed and "WR" not in emu.flags
+
+
 def test_a_stage_whose_replies_carry_checksums_is_refused_in_one_line(clock: SimClock) -> None:
     """``comm.checksum 1`` ends every reply in ``:CC``; the driver read '0:4F' as the data and
     failed on it as a malformed number, naming nothing that would help."""

@@ -63,6 +63,10 @@ def test_dry_run_says_how_long_homing_may_take(capsys, monkeypatch, tmp_path) ->
     assert "at most 4 min 0 s (the upper soft limit: 480 mm at 2 mm/s" in out
     _, out = _dry_run_s(capsys, "smoke")  # the simulated bench waits for nothing
     assert "homes" not in out
+    paced = tmp_path / "paced.yaml"  # ... unless it runs paced: 10x real time
+    paced.write_text(load_bench().text.replace("speedup: 0", "speedup: 10"))
+    _, out = _dry_run_s(capsys, "smoke", "--bench", str(paced))
+    assert "at most 2 s (500 mm at 25 mm/s, x1/10)" in out
 
 
 def test_sim_bench_cost_counts_a_model_run_per_burst(monkeypatch) -> None:  # type: ignore[no-untyped-def]

@@ -4,6 +4,7 @@ burst of ``--move``, and the carrier estimate it relies on."""
 from __future__ import annotations
 
 import re
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -145,6 +146,23 @@ def test_refused_requests_are_one_line_and_exit_2(
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and message in err, err
     assert not made  # refused before anything was connected
+
+
+def test_the_test_bursts_amplitude_is_checked_as_the_driver_checks_it(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The five-cycle test burst's peaks are unequal (x1.088 of half its Vpp under one reading
+    of the generator's amplitude): 4.8 Vpp on a 50 V piezo at gain 20 passed the request's check
+    at 48 V, homed and moved the stage, then was refused by the driver as a 'MISMATCH'."""
+    from protocols.bench import load_bench
+
+    bench = tmp_path / "bench.yaml"
+    bench.write_text(load_bench().text.replace("piezo_max: 150 V", "piezo_max: 50 V"))
+    made = _connected(monkeypatch)
+    assert main(["check", str(bench), "--move", "--amplitude", "4.8 Vpp"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "gives up to 52.2 V at the piezo" in err and "x1.088" in err, err
+    assert not made
 
 
 @pytest.mark.parametrize("rate", [200e3, 1e6])

@@ -4,13 +4,14 @@ terminal, plain lines when piped; run_protocol shows the engine's progress throu
 from __future__ import annotations
 
 import io
+import math
 from pathlib import Path
 
 import pytest
 
 import daq.connect
 from daq.cli import run_protocol as rp
-from daq.progress import ProgressDisplay, format_duration, format_rate
+from daq.progress import ProgressDisplay, format_duration, format_minutes, format_rate
 
 from .fakes import FakeWorld, fake_bench
 from .helpers import PROTOCOL
@@ -82,6 +83,9 @@ def test_formats() -> None:
     assert format_duration(float("inf")) == "--:--"
     assert format_rate(10, 2.0, "point") == "5 points/s"
     assert format_rate(1, 12.0, "point") == "12 s/point"
+    # a bound: rounded up (20.4 s is "at most 21 s"), not down; not finite said so
+    assert format_minutes(20.4) == "21 s" and format_minutes(20.000001) == "20 s"
+    assert format_minutes(150.0) == "2 min 30 s" and format_minutes(math.inf) == "an unknown time"
 
 
 @pytest.mark.parametrize("tty", [True, False])

@@ -174,6 +174,33 @@ def test_bench_file_per_volt_units() -> None:
         parse_bench(load_bench().text.replace("0.05 um/V", "0.05"))
 
 
+def test_a_burst_too_long_for_the_generator_is_refused_without_sampling_it(
+    tmp_path: Path, capsys, monkeypatch
+) -> None:  # type: ignore[no-untyped-def]
+    """The piezo check samples each burst at the generator's rate (its peaks); a 1 s burst at
+    200 MSa/s (2e8 points, the generator holds 1e6) ran out of memory there (8.9 GiB) before
+    the check that refuses it."""
+    import instruments.burst
+    from daq.cli import run_protocol as rp
+
+    sampled: list[float] = []
+    real = instruments.burst.burst_samples
+
+    def spy(burst, rate):  # type: ignore[no-untyped-def]
+        sampled.append(burst.duration_s * rate)
+        return real(burst, rate)
+
+    monkeypatch.setattr(instruments.burst, "burst_samples", spy)
+    bench = tmp_path / "bench.yaml"
+    bench.write_text(load_bench().text.replace("sample_rate: 1 MSa/s", "sample_rate: 100 MSa/s"))
+    proto = tmp_path / "p.yaml"
+    proto.write_text(GOOD.replace("cycles: 5", "width: 0.3 s").replace("10 ms", "5 s"))
+    code = rp.main([str(proto), "--bench", str(bench), "--out", str(tmp_path / "o.h5")])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and "1,000,000" in err, err
+    assert max(sampled, default=0.0) <= 1e6  # what the generator holds, no more
+
+
 def test_amplitude_above_the_piezo_limit_via_the_cli(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
     from daq.cli import run_protocol as rp
 
