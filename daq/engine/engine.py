@@ -330,60 +330,18 @@ class RunEngine:
         )
 
     def _generator_name(self) -> str:
-        gen = self.instruments.generator
-        where = str(getattr(getattr(gen, "transport", None), "name", ""))
-        if "generator" in where.lower():
-            return where
-        return f"generator ({where})" if where else "generator"
+        from daq.engine.safe_state import generator_name
+
+        return generator_name(self.instruments.generator)
 
     def _safe_state(self) -> tuple[list[str], list[str]]:
-        """Every instrument's safe state, then the stage's motion and the generator's outputs
-        read back (``OUTPn?``). A stage still moving is unconfirmed; one that does not answer is
-        a problem only: a move ends by itself within the travel, an output stays on.
+        """:func:`daq.engine.safe_state.bring_to_safe_state` on this bench's outputs:
+        ``(problems, unconfirmed)``."""
+        from daq.engine.safe_state import bring_to_safe_state
 
-        Returns ``(problems, unconfirmed)``: problems met on the way (logged) and what could
-        not be confirmed off, each naming the instrument and output (the run is then unsafe).
-        A generator that already failed to answer is not asked twice per output: one timeout
-        is enough to know it cannot confirm anything.
-        """
-        problems: list[str] = []
-        gen = self.instruments.generator
         channels = sorted(set(self.bench_file.bench.direction_channel.values()))
-        dead = False
-        for ch in channels:
-            try:
-                gen.output(ch, False)
-            except Exception as exc:
-                problems.append(f"generator output {ch} off: {exc}")
-                dead = dead or isinstance(exc, TimeoutError)
-                break  # safe_state() below tries every output once more
-        for name, inst in self.instruments.all().items():
-            if name == "generator" and dead:
-                continue
-            try:
-                inst.safe_state()
-            except Exception as exc:
-                problems.append(f"{name} safe state: {exc}")
-        unconfirmed: list[str] = []
-        gname = self._generator_name()
-        for ch in channels:
-            if dead:
-                unconfirmed.append(f"{gname} output {ch}: it does not answer")
-                continue
-            try:
-                on = bool(gen.output_state(ch))
-            except Exception as exc:
-                unconfirmed.append(f"{gname} output {ch}: cannot read it back ({exc})")
-                dead = dead or isinstance(exc, TimeoutError)
-                continue
-            if on:
-                unconfirmed.append(f"{gname} output {ch}: still ON after OUTP{ch} OFF")
-        try:  # after the outputs: the stage decelerates after its stop (its safe state waited)
-            if self.instruments.stage.is_moving():
-                unconfirmed.append("stage controller: the axis still moves after 'stop'")
-        except Exception as exc:  # a silent stage ends its bounded move by itself
-            problems.append(f"stage: cannot read whether it stopped: {exc}")
-        return problems, unconfirmed
+        found = bring_to_safe_state(self.instruments, channels)
+        return found.problems, found.unconfirmed
 
     # -- the run ---------------------------------------------------------------------------
     def run(self) -> RunResult:

@@ -390,28 +390,16 @@ class MainWindow(QMainWindow):
             return
 
         def work() -> dict[str, Any]:
-            problems = []
-            bf = self.bench_file
-            for ch in sorted(set(bf.bench.direction_channel.values())):
-                try:
-                    inst.generator.output(ch, False)
-                except Exception as exc:
-                    problems.append(f"generator output {ch} off: {exc}")
-            for name, i in inst.all().items():
-                try:
-                    i.safe_state()
-                except Exception as exc:
-                    problems.append(f"{name}: {exc}")
-            for ch in sorted(set(bf.bench.direction_channel.values())):
-                try:
-                    if inst.generator.output_state(ch):
-                        problems.append(f"generator output {ch} still ON: switch it off by hand")
-                except Exception as exc:
-                    problems.append(
-                        f"generator output {ch} not confirmed off ({exc}): switch it off by hand"
-                    )
-            if problems:
-                raise RuntimeError("; ".join(problems))
+            from daq.engine.outcome import unsafe_instruction
+            from daq.engine.safe_state import bring_to_safe_state
+
+            channels = sorted(set(self.bench_file.bench.direction_channel.values()))
+            found = bring_to_safe_state(inst, channels)
+            said = [*found.problems]
+            if found.unconfirmed:
+                said.append(unsafe_instruction(found.unconfirmed))
+            if said:
+                raise RuntimeError("; ".join(said))
             snap: dict[str, Any] = inst.snapshot()
             return snap
 

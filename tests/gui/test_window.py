@@ -191,6 +191,23 @@ def test_dry_run_on_the_lab_bench_says_how_long_homing_may_take(
     assert "homes if it is not homed: at most 20 s (X-LSM500A: 500 mm at 25 mm/s" in line, line
 
 
+def test_the_safe_state_button_says_what_it_could_not_confirm(
+    qtbot: Any, window: MainWindow
+) -> None:
+    """Outside a run the button takes the run's own path to the safe state: outputs off and
+    read back, then the stage asked whether its axis came to rest. Before, it had a copy of
+    that path without the stage, and said "instruments in safe state" beside a moving axis."""
+    connect(qtbot, window)
+    window.bench_panel.safe_button.click()
+    qtbot.waitUntil(lambda: "instruments in safe state" in window.log_view.lines[-1], timeout=5000)
+    stage = window.instruments.stage
+    stage.is_moving = lambda: True  # type: ignore[method-assign]
+    window.bench_panel.safe_button.click()
+    qtbot.waitUntil(lambda: "safe state:" in window.log_view.lines[-1], timeout=5000)
+    line = window.log_view.lines[-1]
+    assert "SWITCH OFF BY HAND: stage controller: the axis still moves" in line, line
+
+
 def test_close_during_run_aborts_safely(qtbot: Any, tmp_path: Path) -> None:
     win = MainWindow(None, SMOKE, assembler=make_assembler(read_sleep_s=0.1))
     qtbot.addWidget(win)
