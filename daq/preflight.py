@@ -389,6 +389,31 @@ class BurstTest:
     rate_Hz: float = 200e3
 
 
+#: the item of the finding :func:`safe_state_finding` makes
+SAFE_STATE_ITEM = "safe state after the burst"
+
+
+def safe_state_finding(bf: BenchFile, inst: BenchInstruments) -> Finding:
+    """After the burst test: every instrument to its safe state, the generator's outputs read
+    back and the stage asked whether its axis came to rest (the run's own path,
+    :mod:`daq.engine.safe_state`); MISMATCH naming what to switch off by hand."""
+    from daq.engine.outcome import unsafe_instruction
+    from daq.engine.safe_state import bring_to_safe_state
+
+    channels = sorted(set(bf.bench.direction_channel.values()))
+    found = bring_to_safe_state(inst, channels)
+    if found.unconfirmed:
+        return Finding(
+            "bench",
+            SAFE_STATE_ITEM,
+            "outputs off, stage at rest",
+            "; ".join(found.unconfirmed),
+            "MISMATCH",
+            unsafe_instruction(found.unconfirmed),
+        )
+    return Finding("bench", SAFE_STATE_ITEM, "outputs off, stage at rest", "confirmed", "ok")
+
+
 def burst_peak_factor(bf: BenchFile, test: BurstTest) -> float:
     """The test burst's ``arb_peak_factor`` at the bench's generator rate (the piezo limit is
     checked with it, as the driver checks the burst it uploads)."""

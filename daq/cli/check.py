@@ -121,9 +121,14 @@ def run(args: argparse.Namespace) -> int:
                         "the burst test did not complete",
                     )
                 )
+            findings.append(preflight.safe_state_finding(bf, inst))
     finally:
         inst.close()
     print_findings(findings, sys.stdout)
+    unsafe = [f for f in findings if f.item == preflight.SAFE_STATE_ITEM and f.status != "ok"]
+    if unsafe:
+        print(f"biafc check: UNSAFE: {unsafe[0].hint}", file=sys.stderr)
+        return 3
     n_bad = sum(f.status == "MISMATCH" for f in findings)
     if n_bad:
         print(f"biafc check: {n_bad} mismatch(es): fix them before a scan", file=sys.stderr)

@@ -107,8 +107,9 @@ def test_check_move_fires_one_burst_and_leaves_the_bench_safe(
     capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
     made = _connected(monkeypatch)
-    main(["check", "--move", "--cylinder", "2"])
+    assert main(["check", "--move", "--cylinder", "2"]) == 0
     out = capsys.readouterr().out
+    assert re.search(r"^ok\s+bench\s+safe state after the burst\s+.*confirmed$", out, re.M)
     assert re.search(r"^ok\s+burst\s+signal level at cylinder 2", out, re.M)
     assert re.search(r"^ok\s+burst\s+output 1 load\s+high Z \(INF\)\s+high Z \(INF\)", out, re.M)
     assert re.search(r"^ok\s+burst\s+velocity peak\s+[\d.]+ mm/s", out, re.M)
@@ -122,6 +123,25 @@ def test_check_move_fires_one_burst_and_leaves_the_bench_safe(
     assert not any(ch.output_on for ch in emu.generator.channels.values())
     pos = float(emu.stage.position_m())
     assert pos == pytest.approx(float(world.cylinder_positions_m[1]), abs=1e-5)
+
+
+def test_check_move_names_a_safe_state_it_could_not_confirm_exit_3(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """After the burst the outputs are read back and the stage asked whether it came to rest,
+    as at a run's end; before, check --move called each safe state and said nothing of it."""
+
+    def stuck(bench: Any) -> None:
+        bench.stage.is_moving = lambda: True
+        bench.generator.output_state = lambda ch: True  # an output stuck on
+
+    _connected(monkeypatch, stuck)
+    assert main(["check", "--move", "--cylinder", "2"]) == 3
+    cap = capsys.readouterr()
+    assert "MISMATCH bench safe state after the burst" in cap.out
+    last = cap.err.strip().splitlines()[-1]
+    assert last.startswith("biafc check: UNSAFE: SWITCH OFF BY HAND:"), last
+    assert "output 1: still ON" in last and "stage controller" in last
 
 
 @pytest.mark.parametrize(
