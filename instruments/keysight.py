@@ -7,6 +7,7 @@ Configuration, as the programming guide orders it (per channel ``n``)::
     FORM:BORD SWAP                              binary blocks little-endian (set explicitly)
     SOURn:DATA:ARB:DAC BIAFCn,#<n><len><int16...>   the burst as DAC codes -32767..32767
     SOURn:FUNC ARB ; SOURn:FUNC:ARB BIAFCn ; SOURn:FUNC:ARB:SRAT <Sa/s>
+    SOURn:FUNC:ARB:FILT NORM                    the flat-band filter between points (default)
     SOURn:VOLT:LIM:STAT OFF                     the load cannot change while limits are on
     OUTPn:LOAD INF ; SOURn:VOLT:UNIT VPP         high impedance (piezo amplifier input), Vpp
     SOURn:VOLT:LIM:HIGH/LOW, SOURn:VOLT:LIM:STAT ON  hard output limits (bench safety)
@@ -374,6 +375,7 @@ class KeysightGenerator:
         w(f"SOUR{n}:FUNC {req.function}")
         w(f"SOUR{n}:FUNC:ARB {req.arb_name}")
         w(f"SOUR{n}:FUNC:ARB:SRAT {req.sample_rate_Hz:.12g}")
+        w(f"SOUR{n}:FUNC:ARB:FILT {req.arb_filter}")  # as shipped; another user may leave STEP
         w(f"SOUR{n}:VOLT:LIM:STAT OFF")
         w(f"OUTP{n}:LOAD {req.load}")
         w(f"SOUR{n}:VOLT:UNIT {req.amplitude_unit}")

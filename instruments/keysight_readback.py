@@ -55,6 +55,7 @@ class ChannelRequest:
     trigger_source: str
     burst_cycles: int = 1
     function: str = "ARB"
+    arb_filter: str = "NORM"
     load: str = "INF"
     amplitude_unit: str = "VPP"
     burst_mode: str = "TRIG"
@@ -72,6 +73,8 @@ class ChannelReadback:
         ``FUNC?`` (``"ARB"``) and ``FUNC:ARB?`` (the waveform's name, quotes removed).
     sample_rate_Hz:
         ``FUNC:ARB:SRAT?`` in Sa/s.
+    arb_filter:
+        ``FUNC:ARB:FILT?`` (``"NORM"``: the flat-band filter between the arb's points).
     load_ohm:
         ``OUTPn:LOAD?`` in ohm, ``inf`` for high Z.
     amplitude_Vpp, amplitude_unit:
@@ -92,6 +95,7 @@ class ChannelReadback:
     function: str
     arb_name: str
     sample_rate_Hz: float
+    arb_filter: str
     load_ohm: float
     amplitude_Vpp: float
     amplitude_unit: str
@@ -217,6 +221,7 @@ def _checks(n: int, req: ChannelRequest) -> list[_Check]:
             _rate,
             " Sa/s",
         ),
+        _Check("arb_filter", "arb filter", f"{s}FUNC:ARB:FILT?", parse_word, req.arb_filter, _same),
         _Check("load_ohm", "output load", f"OUTP{n}:LOAD?", parse_load, req.load, _load, " ohm"),
         _Check(
             "amplitude_unit",

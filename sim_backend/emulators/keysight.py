@@ -109,6 +109,8 @@ class ChannelState:
     arb_name: str | None = None
     waveform: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
     sample_rate_Hz: float = 40.0e3
+    #: ``FUNC:ARB:FILT``: NORMal (the default), STEP or OFF
+    arb_filter: str = "NORM"
     amplitude_Vpp: float = 0.1
     offset_V: float = 0.0
     load_ohm: float = 50.0
@@ -303,6 +305,14 @@ class KeysightEmulator:
                 raise ScpiError(-224, "Illegal parameter value;waveform not in volatile memory")
             ch.arb_name = name
             ch.waveform = self.volatile[n][name]
+            return None
+        if key == "FUNC:ARB:FILT":
+            if query:
+                return ch.arb_filter
+            v = scpi_short(arg)
+            if v not in ("NORM", "STEP", "OFF"):
+                raise ScpiError(-224, "Illegal parameter value")
+            ch.arb_filter = v
             return None
         if key == "FUNC:ARB:SRAT":
             if query:

@@ -102,3 +102,16 @@ def test_a_channel_configured_twice_turns_its_limits_off_before_the_load() -> No
     held = gen.held(1)
     assert held is not None and held.amplitude_Vpp == 2.0 and math.isinf(held.load_ohm)
     assert held.limit_on and gen.errors() == []
+
+
+def test_an_arb_filter_left_at_step_is_set_back_and_read_back() -> None:
+    """FUNC:ARB:FILT (NORMal, STEP or OFF) was neither set nor read: a channel left at STEP by
+    another program played the burst as a staircase, and OFF lowers the 33500's arb rate
+    ceiling to 62.5 MSa/s. It is now set to NORMal, the default, and read back."""
+    emu = KeysightEmulator()
+    emu.channels[1].arb_filter = "STEP"
+    gen = on(emu)
+    gen.configure_burst(1, burst(2.0))
+    assert emu.channels[1].arb_filter == "NORM"
+    held = gen.held(1)
+    assert held is not None and held.arb_filter == "NORM"
