@@ -70,8 +70,9 @@ class ZaberEmulator:
         self.late_replies = 0
         #: deceleration after ``stop`` (m/s^2)
         self.accel_m_per_s2 = float(accel_m_per_s2)
-        #: ``comm.checksum``: replies end in ``:CC``, the two's complement of the low byte of the
-        #: sum of the characters after ``@`` (the manual's longitudinal check)
+        #: ``comm.checksum``: replies end in ``:CC``, two hex digits (here the two's complement
+        #: of the low byte of the sum of the characters after ``@``; Zaber's exact rule was not
+        #: found, and the driver only recognises the form, to refuse it)
         self.checksum = bool(checksum)
         #: line speed (baud) the device listens at; 115200 as shipped
         self.baud_rate = BAUD_RATE
