@@ -393,25 +393,31 @@ class BurstTest:
 SAFE_STATE_ITEM = "safe state after the burst"
 
 
-def safe_state_finding(bf: BenchFile, inst: BenchInstruments) -> Finding:
+def safe_state_finding(bf: BenchFile, inst: BenchInstruments) -> tuple[Finding, bool]:
     """After the burst test: every instrument to its safe state, the generator's outputs read
     back and the stage asked whether its axis came to rest (the run's own path,
-    :mod:`daq.engine.safe_state`); MISMATCH naming what to switch off by hand."""
+    :mod:`daq.engine.safe_state`). Returns the finding and whether the bench is *unsafe*
+    (something not confirmed off: the finding's hint says what to switch off by hand); a
+    problem on the way (a stage that did not answer) is a MISMATCH that is not unsafe."""
     from daq.engine.outcome import unsafe_instruction
     from daq.engine.safe_state import bring_to_safe_state
 
     channels = sorted(set(bf.bench.direction_channel.values()))
-    found = bring_to_safe_state(inst, channels)
+    expected = "outputs off, stage at rest"
+    try:
+        found = bring_to_safe_state(inst, channels)
+    except Exception as exc:  # never raises by design; said, not lost, if it does
+        text = f"{type(exc).__name__}: {exc}".splitlines()[0]
+        return Finding("bench", SAFE_STATE_ITEM, expected, text, "MISMATCH", "not confirmed"), True
     if found.unconfirmed:
-        return Finding(
-            "bench",
-            SAFE_STATE_ITEM,
-            "outputs off, stage at rest",
-            "; ".join(found.unconfirmed),
-            "MISMATCH",
-            unsafe_instruction(found.unconfirmed),
-        )
-    return Finding("bench", SAFE_STATE_ITEM, "outputs off, stage at rest", "confirmed", "ok")
+        text = "; ".join(found.unconfirmed + found.problems)
+        hint = unsafe_instruction(found.unconfirmed)
+        return Finding("bench", SAFE_STATE_ITEM, expected, text, "MISMATCH", hint), True
+    if found.problems:
+        text = "outputs confirmed off; " + "; ".join(found.problems)
+        hint = "check the instrument's cable and power"
+        return Finding("bench", SAFE_STATE_ITEM, expected, text, "MISMATCH", hint), False
+    return Finding("bench", SAFE_STATE_ITEM, expected, "confirmed", "ok"), False
 
 
 def burst_peak_factor(bf: BenchFile, test: BurstTest) -> float:

@@ -5,7 +5,8 @@ Used by ``run_protocol`` (points), ``biafc simulate`` (stages), ``biafc accuracy
 ladders) and ``python -m benchmarks`` (benchmarks). The caller says how far it is
 (:meth:`ProgressDisplay.update`) and, when it knows better than the rate so far (the run
 engine's ETA from the bench and the measured point times), the time left; otherwise the ETA is
-the remaining count over the rate measured since the display started.
+the remaining count over the measured rate (:class:`ProgressDisplay`: from the first finished
+item, or wave of items, on).
 
 Plain lines read ``point 3/31: ltr 4 um cyl 3, 2.5 points/s, ETA 00:11`` (at most one a second,
 and always the last one).
@@ -57,9 +58,11 @@ class ProgressDisplay:
     bar (warnings); ``close()`` (or leaving the ``with`` block) ends the bar. ``live``: force
     (True) or forbid (False) the live bar; default: a live bar when ``stream`` is a terminal.
 
-    The rate is counted from the first finished item on, once a second one is done: what comes
-    before it (homing, compiling the model, starting a study's workers) is paid once, and
-    read "15.4 s/point" on the simulated bench's first run, where the points took 0.02 s.
+    The rate is counted from the ``steady_after``-th finished item on (default the first),
+    once more are done: what comes before it (homing, compiling the model, starting a study's
+    workers) is paid once, and read "15.4 s/point" on the simulated bench's first run, where
+    the points took 0.02 s. Work done in parallel waves gives ``steady_after`` as one wave's
+    items: its first wave ends within milliseconds, which is no rate.
     """
 
     def __init__(
@@ -73,8 +76,10 @@ class ProgressDisplay:
         live: bool | None = None,
         plain_every_s: float = 1.0,
         start_done: int = 0,
+        steady_after: int = 1,
     ) -> None:
         self.total = max(int(total), 0)
+        self.steady_after = max(int(steady_after), 1)
         self.unit = unit
         self.label = label
         self.stream = stream if stream is not None else sys.stderr
@@ -85,7 +90,8 @@ class ProgressDisplay:
         self.done = start_done
         self._start_done = start_done
         self._t0 = time.monotonic()
-        #: (time, done) at the first update that finished an item: the steady rate's start
+        #: (time, done) at the update that finished the ``steady_after``-th item: the steady
+        #: rate's start
         self._first: tuple[float, int] | None = None
         self._last_plain = -math.inf
         self._progress: Any = None
@@ -123,8 +129,8 @@ class ProgressDisplay:
 
     # -- the caller's side -----------------------------------------------------------------
     def _counted(self) -> tuple[int, float]:
-        """(items, seconds) the rate is measured over: from the first finished item on once
-        there are more, else from the start."""
+        """(items, seconds) the rate is measured over: from the ``steady_after``-th finished
+        item on once there are more, else from the start."""
         now = time.monotonic()
         if self._first is not None and self.done > self._first[1]:
             return self.done - self._first[1], now - self._first[0]
@@ -144,7 +150,7 @@ class ProgressDisplay:
         """``done`` of ``total`` finished; ``detail`` says which; ``eta_s``: the time left when
         the caller knows it better than the rate (else it follows from the rate)."""
         self.done = int(done)
-        if self._first is None and self.done > self._start_done:
+        if self._first is None and self.done - self._start_done >= self.steady_after:
             self._first = (time.monotonic(), self.done)
         if self.quiet or self._closed:
             return

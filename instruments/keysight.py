@@ -6,8 +6,9 @@ Configuration, as the programming guide orders it (per channel ``n``)::
     SOURn:DATA:VOL:CLE                          clear volatile arb memory
     FORM:BORD SWAP                              binary blocks little-endian (set explicitly)
     SOURn:DATA:ARB:DAC BIAFCn,#<n><len><int16...>   the burst as DAC codes -32767..32767
-    SOURn:FUNC ARB ; SOURn:FUNC:ARB BIAFCn ; SOURn:FUNC:ARB:SRAT <Sa/s>
+    SOURn:FUNC ARB ; SOURn:FUNC:ARB BIAFCn
     SOURn:FUNC:ARB:FILT NORM                    the flat-band filter between points (default)
+    SOURn:FUNC:ARB:SRAT <Sa/s>
     SOURn:VOLT:LIM:STAT OFF                     the load cannot change while limits are on
     OUTPn:LOAD INF ; SOURn:VOLT:UNIT VPP         high impedance (piezo amplifier input), Vpp
     SOURn:VOLT:LIM:HIGH/LOW, SOURn:VOLT:LIM:STAT ON  hard output limits (bench safety)
@@ -374,8 +375,9 @@ class KeysightGenerator:
         self.transport.write_block(f"SOUR{n}:DATA:ARB:DAC {req.arb_name},", data)
         w(f"SOUR{n}:FUNC {req.function}")
         w(f"SOUR{n}:FUNC:ARB {req.arb_name}")
+        # the filter first: left OFF, it caps the rate at 62.5 MSa/s (33500) and would clip SRAT
+        w(f"SOUR{n}:FUNC:ARB:FILT {req.arb_filter}")
         w(f"SOUR{n}:FUNC:ARB:SRAT {req.sample_rate_Hz:.12g}")
-        w(f"SOUR{n}:FUNC:ARB:FILT {req.arb_filter}")  # as shipped; another user may leave STEP
         w(f"SOUR{n}:VOLT:LIM:STAT OFF")
         w(f"OUTP{n}:LOAD {req.load}")
         w(f"SOUR{n}:VOLT:UNIT {req.amplitude_unit}")

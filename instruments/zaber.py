@@ -238,7 +238,8 @@ class ZaberStage:
         self._next_id = 0
         #: a stall or limit warning was cleared at connect: home before the next move
         self._must_home = False
-        self._stop_unanswered = False  # the last safe state's stop got no reply
+        #: the last safe state got no reply (to its stop or a poll), and nothing since
+        self._stop_unanswered = False
 
     # --- wire ---------------------------------------------------------------------------
     def _message_id(self) -> int:
@@ -279,6 +280,7 @@ class ZaberStage:
             break
         else:
             raise ReplyError(f"{self.transport.name}: no reply to {cmd!r} among the lines read")
+        self._stop_unanswered = False  # it answers again
         if r.device != s.device:
             raise ReplyError(f"{self.transport.name}: reply to {cmd!r} from device {r.device}")
         rejected = "" if r.ok else f"; rejected ({r.data or 'no reason given'})"
@@ -657,8 +659,12 @@ class ZaberStage:
 
     def safe_state(self) -> None:
         """Stop, and wait for the axis to come to rest (at most ``stop_timeout_s``); never
-        raises (a failure is logged; :meth:`is_moving` tells the caller what came of it)."""
-        self._stop_unanswered = False
+        raises (a failure is logged; :meth:`is_moving` tells the caller what came of it). After
+        a safe state that got no reply, nothing is sent until a command is answered again: each
+        try would cost the link's whole timeout (a run's end, ``biafc check``, closing)."""
+        if self._stop_unanswered:
+            log.warning("%s: no reply to the last 'stop'; not sent again", self.transport.name)
+            return
         try:
             self.stop()
             if not self._wait_rest():

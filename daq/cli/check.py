@@ -3,8 +3,10 @@
 Connects every instrument of the bench file (default: the shipped simulated bench), prints what
 each reports (identity, firmware, the settings that matter) beside what the bench file expects,
 and flags every mismatch. ``--move`` also homes the stage and fires one low-amplitude burst at
-one cylinder (signal level, velocity, carrier). Exit status: 0 all match; 1 a mismatch, or an
-instrument that did not answer; 2 the request was refused (bad bench file, bad option).
+one cylinder (signal level, velocity, carrier), then confirms the run's safe state (outputs read
+back off, the stage at rest). Exit status: 0 all match; 1 a mismatch, or an instrument that did
+not answer; 2 the request was refused (bad bench file, bad option); 3 after ``--move`` the safe
+state not confirmed (what to switch off by hand is named).
 """
 
 from __future__ import annotations
@@ -105,29 +107,37 @@ def run(args: argparse.Namespace) -> int:
     except (ConfigError, InstrumentError, OSError) as exc:
         print(f"biafc check: cannot connect: {str(exc).splitlines()[0]}", file=sys.stderr)
         return 1
+    unsafe = None
     try:
         findings = preflight.check_settings(bf, inst)
         if test is not None:
+            leaving = True  # on another error or a stop signal, until the burst test is done
             try:
-                findings += preflight.check_burst(bf, inst, test)
-            except (InstrumentError, ValueError) as exc:
-                findings.append(
-                    preflight.Finding(
-                        "burst",
-                        "one burst",
-                        "",
-                        str(exc).splitlines()[0],
-                        "MISMATCH",
-                        "the burst test did not complete",
+                try:
+                    findings += preflight.check_burst(bf, inst, test)
+                except (InstrumentError, ValueError) as exc:
+                    findings.append(
+                        preflight.Finding(
+                            "burst",
+                            "one burst",
+                            "",
+                            str(exc).splitlines()[0],
+                            "MISMATCH",
+                            "the burst test did not complete",
+                        )
                     )
-                )
-            findings.append(preflight.safe_state_finding(bf, inst))
+                leaving = False
+            finally:  # the burst may have fired: its safe state is confirmed either way
+                safe, is_unsafe = preflight.safe_state_finding(bf, inst)
+                unsafe = safe if is_unsafe else None
+                if is_unsafe and leaving:  # no table will follow: say it now
+                    print(f"biafc check: UNSAFE: {safe.hint}", file=sys.stderr, flush=True)
+            findings.append(safe)
     finally:
         inst.close()
     print_findings(findings, sys.stdout)
-    unsafe = [f for f in findings if f.item == preflight.SAFE_STATE_ITEM and f.status != "ok"]
-    if unsafe:
-        print(f"biafc check: UNSAFE: {unsafe[0].hint}", file=sys.stderr)
+    if unsafe is not None:
+        print(f"biafc check: UNSAFE: {unsafe.hint}", file=sys.stderr)
         return 3
     n_bad = sum(f.status == "MISMATCH" for f in findings)
     if n_bad:

@@ -161,7 +161,7 @@ def _run(args: argparse.Namespace, setup: Any, table: Any, store: Any, client: A
     from daq.cli.stop_signals import raise_if_stopped
     from daq.progress import ProgressDisplay
     from daq.store.disk_space import DiskFull
-    from daq.study_runner import dask_client, no_worker_notice, run_study
+    from daq.study_runner import dask_client, n_workers, no_worker_notice, run_study
     from protocols.left_open import exit_leaving_them
     from protocols.studyfile import StudyFileError
 
@@ -172,8 +172,18 @@ def _run(args: argparse.Namespace, setup: Any, table: Any, store: Any, client: A
     error: Exception | None = None
     t0 = time.perf_counter()
     try:
+        # tasks end in waves, one per worker: the rate is counted from the end of the first
+        workers = 1 if args.workers == 0 else (args.workers or os.cpu_count() or 1)
+        if client is not None:
+            workers = max(n_workers(client), 1)
+        wave = workers * setup.study.run.cells_per_task
         with ProgressDisplay(
-            table.n_cells, unit="cell", label="study", quiet=args.quiet, start_done=done0
+            table.n_cells,
+            unit="cell",
+            label="study",
+            quiet=args.quiet,
+            start_done=done0,
+            steady_after=wave,
         ) as progress:
 
             def on_task(i: int, res: Any, n_done: int) -> None:

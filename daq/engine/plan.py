@@ -163,7 +163,7 @@ def _check_amplitudes(pf: ProtocolFile, bf: BenchFile, vpp: NDArray[np.float64])
     factor = 1.0
     for d in pf.protocol.direction_list:
         burst = pf.protocol.burst[d].burst()
-        if burst.duration_s * rate + 1 <= limits.max_points:  # longer ones are refused later
+        if round(burst.duration_s * rate) + 1 <= limits.max_points:  # longer: refused later
             factor = max(factor, arb_peak_factor(burst_samples(burst, rate)))
     piezo_vpp = 2.0 * amp.piezo_max / amp.gain / factor
     max_vpp = min(gen_max, piezo_vpp)

@@ -381,19 +381,23 @@ class MainWindow(QMainWindow):
 
     def safe_state(self) -> None:
         """During a run: abort (the engine puts every instrument in its safe state).
-        Otherwise: generator outputs off and every instrument's ``safe_state()``."""
+        Otherwise the run's own path (:mod:`daq.engine.safe_state`): outputs off, every
+        instrument's ``safe_state()``, the outputs read back and the stage asked whether it
+        came to rest; what is not confirmed is logged as what to switch off by hand. The button
+        is disabled meanwhile (the stage may take seconds to come to rest)."""
         if self.running:
             self.abort("safe state requested")
             return
         inst = self.instruments
         if inst is None:
             return
+        channels = sorted(set(self.bench_file.bench.direction_channel.values()))
+        self.bench_panel.safe_button.setEnabled(False)
 
         def work() -> dict[str, Any]:
             from daq.engine.outcome import unsafe_instruction
             from daq.engine.safe_state import bring_to_safe_state
 
-            channels = sorted(set(self.bench_file.bench.direction_channel.values()))
             found = bring_to_safe_state(inst, channels)
             said = [*found.problems]
             if found.unconfirmed:
@@ -404,8 +408,13 @@ class MainWindow(QMainWindow):
             return snap
 
         def done(snap: Any, err: BaseException | None) -> None:
+            if inst is self.instruments:
+                self.bench_panel.safe_button.setEnabled(True)
             if err is not None:
                 self.log(f"safe state: {err}", "error")
+                return
+            if inst is not self.instruments:  # disconnected meanwhile: not this bench's state
+                self.log("instruments in safe state (before the bench was disconnected)")
                 return
             self.log("instruments in safe state")
             self.bench_panel.show_snapshot(snap)

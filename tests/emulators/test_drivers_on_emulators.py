@@ -296,7 +296,12 @@ def test_a_stage_still_moving_after_the_bound_or_silent_is_said_so(
     sent = len(emu.commands)
     with pytest.raises(InstrumentTimeout, match="no reply to 'stop'"):
         stage.is_moving()
-    assert len(emu.commands) == sent  # nothing sent: the link is known dead
+    t0 = clock.now()
+    stage.safe_state()  # closing, or the next caller: not another whole timeout
+    assert len(emu.commands) == sent and clock.now() == t0  # nothing sent: the link is dead
+    emu.responsive = True  # once a command is answered again, it is asked as before
+    clock.sleep(15.0)  # the 12.5 s deceleration is over
+    assert stage.position() >= 0 and not stage.is_moving()
 
 
 def test_a_stop_after_the_homing_ended_keeps_the_reference(clock: SimClock) -> None:

@@ -144,6 +144,40 @@ def test_check_move_names_a_safe_state_it_could_not_confirm_exit_3(
     assert "output 1: still ON" in last and "stage controller" in last
 
 
+def test_check_move_says_a_silent_stage_and_confirms_after_any_error(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A stage that does not answer whether it stopped read as 'confirmed' (exit 0); an error
+    the burst test did not expect (an OSError, a stop signal) left without reading anything
+    back."""
+    from daq import preflight
+    from instruments.errors import InstrumentTimeout
+
+    def silent(bench: Any) -> None:
+        def no_reply() -> bool:
+            raise InstrumentTimeout("stage: no reply to 'get pos'")
+
+        bench.stage.is_moving = no_reply
+
+    _connected(monkeypatch, silent)
+    assert main(["check", "--move", "--cylinder", "2"]) == 1
+    out = capsys.readouterr().out
+    assert "MISMATCH bench safe state after the burst: outputs confirmed off; stage: cannot " in out
+
+    def stuck(bench: Any) -> None:
+        bench.stage.is_moving = lambda: True
+
+    def broken(*a: Any) -> Any:
+        raise OSError("the card's driver crashed")
+
+    _connected(monkeypatch, stuck)
+    monkeypatch.setattr(preflight, "check_burst", broken)
+    with pytest.raises(OSError):
+        main(["check", "--move", "--cylinder", "2"])
+    err = capsys.readouterr().err
+    assert "biafc check: UNSAFE: SWITCH OFF BY HAND: stage controller" in err, err
+
+
 @pytest.mark.parametrize(
     ("args", "message"),
     [

@@ -70,6 +70,24 @@ def test_the_rate_leaves_out_what_came_before_the_first_item(
         assert p.eta_from_rate() == pytest.approx(0.5)
 
 
+def test_work_in_waves_counts_its_rate_from_the_end_of_the_first_wave(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Eight workers end their first tasks within milliseconds of each other: counted from the
+    first of them, the rate read 1000 items/s and the ETA 1.5 s where 95 s were left."""
+    import daq.progress
+
+    now = [0.0]
+    monkeypatch.setattr(daq.progress.time, "monotonic", lambda: now[0])
+    with ProgressDisplay(160, stream=io.StringIO(), steady_after=8) as p:
+        for wave in range(2):
+            now[0] += 10.0 if wave == 0 else 5.0  # start-up, then 5 s a task
+            for k in range(8):
+                now[0] += 0.001
+                p.update(8 * wave + k + 1)
+        assert p.eta_from_rate() == pytest.approx(144 * 5.0 / 8, rel=0.01)  # 90 s
+
+
 def test_quiet_prints_nothing() -> None:
     s = Tty()
     with ProgressDisplay(2, stream=s, quiet=True) as p:

@@ -206,6 +206,7 @@ def test_the_safe_state_button_says_what_it_could_not_confirm(
     qtbot.waitUntil(lambda: "safe state:" in window.log_view.lines[-1], timeout=5000)
     line = window.log_view.lines[-1]
     assert "SWITCH OFF BY HAND: stage controller: the axis still moves" in line, line
+    assert window.bench_panel.safe_button.isEnabled()  # disabled only while it works
 
 
 def test_close_during_run_aborts_safely(qtbot: Any, tmp_path: Path) -> None:
