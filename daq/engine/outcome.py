@@ -51,12 +51,14 @@ def exit_code(result: Any, *, sigint: bool = False) -> ExitCode:
 
 
 def unsafe_instruction(unconfirmed: list[str] | tuple[str, ...]) -> str:
-    """What the person must do by hand when the safe state is not confirmed."""
-    return (
-        "SWITCH OFF BY HAND: "
-        + "; ".join(unconfirmed)
-        + " (or switch the piezo amplifier off) before touching the chain"
-    )
+    """What the person must do by hand when the safe state is not confirmed: the piezo
+    amplifier as the alternative where a generator output is among them, the stage's
+    controller where only the stage is."""
+    drive = any("generator" in u for u in unconfirmed)
+    where = " (or switch the piezo amplifier off) before touching the chain" if drive else ""
+    if not drive:
+        where = " before reaching into the stage's travel"
+    return "SWITCH OFF BY HAND: " + "; ".join(unconfirmed) + where
 
 
 def counts_text(result: Any) -> str:
