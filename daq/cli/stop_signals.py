@@ -70,13 +70,25 @@ def _raise_stop(signum: int, frame: FrameType | None) -> None:
     raise StopSignal(signum)
 
 
+#: a SIGINT came within :func:`stop_signals_interrupt` (each one raises KeyboardInterrupt, as
+#: Python's own handler does; this keeps it for :func:`raise_if_stopped`)
+_interrupted: list[bool] = []
+
+
+def _raise_interrupt(signum: int, frame: FrameType | None) -> None:
+    _interrupted[:] = [True]
+    raise KeyboardInterrupt
+
+
 def raise_if_stopped() -> None:
     """At a safe point of a long command (a study's task boundary): raise the
-    :class:`StopSignal` of a signal that came before, in case Python swallowed it where it
-    landed (an exception in a weakref callback is printed and dropped: the study ran on with its
-    output open)."""
+    :class:`StopSignal` of a signal that came before, or KeyboardInterrupt for a Ctrl-C, in
+    case Python swallowed it where it landed (an exception in a weakref callback is printed and
+    dropped: the study ran on with its output open, and exited 0)."""
     if _raised:
         raise StopSignal(_raised[0])
+    if _interrupted:
+        raise KeyboardInterrupt
 
 
 @contextmanager
@@ -85,20 +97,25 @@ def stop_signals_interrupt() -> Iterator[None]:
     as SIGINT raises KeyboardInterrupt: a ``kill``, a closed terminal or a batch system's time
     limit ends a ``biafc`` command the way Ctrl-C does, not by the default action, which left
     a study's output open for writing (readable only after ``biafc repair``). Only the first
-    such signal raises; later ones are ignored unless :data:`REPEAT_AFTER_S` has passed. The
-    previous handlers come back at the end.
+    such signal raises; later ones are ignored unless :data:`REPEAT_AFTER_S` has passed. SIGINT
+    raises KeyboardInterrupt each time, as Python's own handler does, and is remembered for
+    :func:`raise_if_stopped`. The previous handlers come back at the end.
     Off the main thread (where Python cannot install handlers) the block runs as it is."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     _raised.clear()
+    _interrupted.clear()
     old = {s: signal.signal(s, _raise_stop) for s in stop_signals() if s != signal.SIGINT}
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # not when ignored
+        old[signal.SIGINT] = signal.signal(signal.SIGINT, _raise_interrupt)
     try:
         yield
     finally:
         for s, h in old.items():
             signal.signal(s, h)
         _raised.clear()
+        _interrupted.clear()
 
 
 def leave_the_terminal() -> None:

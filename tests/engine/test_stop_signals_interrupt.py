@@ -49,6 +49,23 @@ def test_a_swallowed_stop_signal_is_raised_again_at_the_next_safe_point() -> Non
     raise_if_stopped()  # outside the block: nothing pending
 
 
+def test_a_swallowed_ctrl_c_is_raised_again_at_the_next_safe_point() -> None:
+    """A terminal's Ctrl-C during a study landed in a weakref callback ("Exception ignored in
+    ... KeyboardInterrupt"): the study ran to its end and exited 0 (once in a fresh-clone CI
+    run). SIGINT is now remembered as the other stop signals are."""
+    before = signal.getsignal(signal.SIGINT)
+    with stop_signals_interrupt():
+        try:
+            os.kill(os.getpid(), signal.SIGINT)
+            _wait_for_signal()
+        except KeyboardInterrupt as exc:
+            assert not isinstance(exc, StopSignal)  # Ctrl-C's own: exit 130, not 128 + n
+        with pytest.raises(KeyboardInterrupt):
+            raise_if_stopped()
+    raise_if_stopped()  # outside the block: nothing pending
+    assert signal.getsignal(signal.SIGINT) is before  # put back
+
+
 def test_biafc_runs_off_the_main_thread() -> None:
     from daq.cli.biafc import main
 
