@@ -6,6 +6,7 @@ from __future__ import annotations
 import io
 import math
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
 
@@ -57,7 +58,7 @@ def test_the_rate_leaves_out_what_came_before_the_first_item(
     import daq.progress
 
     now = [100.0]
-    monkeypatch.setattr(daq.progress.time, "monotonic", lambda: now[0])
+    monkeypatch.setattr(daq.progress, "time", SimpleNamespace(monotonic=lambda: now[0]))
     s = io.StringIO()
     with ProgressDisplay(10, stream=s, plain_every_s=0.0) as p:
         now[0] += 15.0
@@ -78,7 +79,7 @@ def test_work_in_waves_counts_its_rate_from_the_end_of_the_first_wave(
     import daq.progress
 
     now = [0.0]
-    monkeypatch.setattr(daq.progress.time, "monotonic", lambda: now[0])
+    monkeypatch.setattr(daq.progress, "time", SimpleNamespace(monotonic=lambda: now[0]))
     with ProgressDisplay(160, stream=io.StringIO(), steady_after=8) as p:
         for wave in range(2):
             now[0] += 10.0 if wave == 0 else 5.0  # start-up, then 5 s a task
