@@ -118,6 +118,10 @@ class MainWindow(QMainWindow):
         self.run_path: Path | None = None
         self._dirty = False
         self._busy_connect = False
+        #: the instruments a Safe state works on now; a disconnect meanwhile leaves their closing
+        #: to it (two threads on one transport could cross their replies)
+        self._safe_busy: Any = None
+        self._close_after_safe = False
         self._pending_start: tuple[Path | None] | None = None
         # the model (numba, the compiled kernel, the chain's tools) loads here, before the
         # window turns, not on the event loop or beside it when the first run starts
@@ -308,7 +312,9 @@ class MainWindow(QMainWindow):
     def _disconnect(self) -> None:
         inst, self.instruments = self.instruments, None
         self.chain = None
-        if inst is not None:
+        if inst is not None and inst is self._safe_busy:
+            self._close_after_safe = True  # the Safe state's end closes them
+        elif inst is not None:
             BackgroundCall(inst.close, lambda r, e: None, name="biafc-gui-close")
         self.bench_panel.set_connected(False)
 
@@ -393,6 +399,7 @@ class MainWindow(QMainWindow):
             return
         channels = sorted(set(self.bench_file.bench.direction_channel.values()))
         self.bench_panel.safe_button.setEnabled(False)
+        self._safe_busy, self._close_after_safe = inst, False
 
         def work() -> dict[str, Any]:
             from daq.engine.outcome import unsafe_instruction
@@ -408,6 +415,10 @@ class MainWindow(QMainWindow):
             return snap
 
         def done(snap: Any, err: BaseException | None) -> None:
+            self._safe_busy = None
+            if self._close_after_safe:  # disconnected meanwhile: closed now, after it
+                self._close_after_safe = False
+                BackgroundCall(inst.close, lambda r, e: None, name="biafc-gui-close")
             if inst is self.instruments:
                 self.bench_panel.safe_button.setEnabled(True)
             if err is not None:

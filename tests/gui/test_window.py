@@ -209,6 +209,38 @@ def test_the_safe_state_button_says_what_it_could_not_confirm(
     assert window.bench_panel.safe_button.isEnabled()  # disabled only while it works
 
 
+def test_a_disconnect_during_the_safe_state_closes_the_instruments_after_it(
+    qtbot: Any, window: MainWindow
+) -> None:
+    """Reconnecting while the Safe state worked closed the same transports from another
+    thread, whose replies could cross; now the close waits for the Safe state's end."""
+    import threading
+
+    connect(qtbot, window)
+    inst = window.instruments
+    release, closed = threading.Event(), []
+    real_safe, real_close = inst.stage.safe_state, inst.close
+
+    def slow_safe() -> None:
+        release.wait(10)
+        real_safe()
+
+    def close() -> None:
+        closed.append(release.is_set())
+        real_close()
+
+    inst.stage.safe_state = slow_safe
+    inst.close = close
+    window.bench_panel.safe_button.click()
+    qtbot.wait(100)
+    window._disconnect()
+    qtbot.wait(200)
+    assert closed == []  # not while the Safe state works on them
+    release.set()
+    qtbot.waitUntil(lambda: closed == [True], timeout=5000)
+    assert "before the bench was disconnected" in window.log_view.lines[-1]
+
+
 def test_close_during_run_aborts_safely(qtbot: Any, tmp_path: Path) -> None:
     win = MainWindow(None, SMOKE, assembler=make_assembler(read_sleep_s=0.1))
     qtbot.addWidget(win)
