@@ -109,9 +109,20 @@ def stop_signals_interrupt() -> Iterator[None]:
     old = {s: signal.signal(s, _raise_stop) for s in stop_signals() if s != signal.SIGINT}
     if signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # not when ignored
         old[signal.SIGINT] = signal.signal(signal.SIGINT, _raise_interrupt)
+    old_hook = sys.unraisablehook
+
+    def quiet_stop(unraisable: Any) -> None:
+        # a stop signal that landed where Python drops exceptions (a weakref callback) is
+        # raised again at the next safe point: its "Exception ignored in" traceback is noise
+        if isinstance(unraisable.exc_value, KeyboardInterrupt) and (_raised or _interrupted):
+            return
+        old_hook(unraisable)
+
+    sys.unraisablehook = quiet_stop
     try:
         yield
     finally:
+        sys.unraisablehook = old_hook
         for s, h in old.items():
             signal.signal(s, h)
         _raised.clear()
