@@ -49,7 +49,14 @@ from instruments.errors import InstrumentError, InstrumentTimeout, LimitError, R
 from instruments.interfaces import BurstConfig, Transport
 from instruments.keysight_readback import ChannelReadback, ChannelRequest, read_channel
 
-__all__ = ["DAC_FULL_SCALE", "GeneratorLimits", "KeysightGenerator", "arb_peak_factor", "dac_codes"]
+__all__ = [
+    "DAC_FULL_SCALE",
+    "GeneratorLimits",
+    "KeysightGenerator",
+    "arb_peak_factor",
+    "dac_codes",
+    "unequal_peaks",
+]
 
 log = logging.getLogger(__name__)
 
@@ -122,15 +129,11 @@ class GeneratorLimits:
         peak_V = 0.5 * config.amplitude_Vpp * peak_factor + abs(config.offset_V)
         piezo_V = peak_V * self.amplifier_gain
         if piezo_V > self.max_piezo_V * (1 + 1e-12):
-            unequal = (
-                f"; the waveform's peaks are unequal, so it may reach x{peak_factor:.4g} of "
-                "half its Vpp"
-                if peak_factor > 1.0 + 1e-9
-                else ""
-            )
+            why = unequal_peaks(peak_factor, "waveform")
             raise LimitError(
                 f"peak at the piezo {piezo_V:g} V (generator peak {peak_V:g} V x gain "
-                f"{self.amplifier_gain:g}) exceeds the piezo limit {self.max_piezo_V:g} V" + unequal
+                f"{self.amplifier_gain:g}) exceeds the piezo limit {self.max_piezo_V:g} V"
+                + (f"; {why}" if why else "")
             )
         if config.sample_rate_Hz > self.max_sample_rate_Hz:
             raise LimitError(
@@ -151,10 +154,19 @@ def arb_peak_factor(samples: NDArray[np.float64]) -> float:
     if x.size == 0 or not np.all(np.isfinite(x)):
         return 1.0
     top, bottom = float(np.max(x)), float(np.min(x))
+    if top <= bottom:
+        return 1.0
     peak = max(abs(top), abs(bottom))
-    if top - bottom <= 0.0:
-        return max(peak, 1.0) if peak > 0 else 1.0
     return max(peak, 2.0 * peak / (top - bottom))
+
+
+def unequal_peaks(peak_factor: float, what: str = "burst") -> str:
+    """``"the burst's peaks are unequal, so it may reach x1.088 of half its Vpp"``: why a piezo
+    limit was checked at more than half the Vpp (``peak_factor``: :func:`arb_peak_factor`),
+    or "" where it was not."""
+    if not peak_factor > 1.0 + 1e-9:
+        return ""
+    return f"the {what}'s peaks are unequal, so it may reach x{peak_factor:.4g} of half its Vpp"
 
 
 def dac_codes(samples: NDArray[np.float64]) -> NDArray[np.int16]:

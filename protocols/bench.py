@@ -366,7 +366,7 @@ class BenchSpec(_Model):
         """Why ``vpp`` (generator Vpp) is not allowed on this bench, or ``None``;
         ``peak_factor``: the waveform's ``instruments.keysight.arb_peak_factor`` (its peak at
         the piezo is taken as ``vpp / 2 x peak_factor x gain``, as the driver checks it)."""
-        from instruments.keysight import GeneratorLimits
+        from instruments.keysight import GeneratorLimits, unequal_peaks
 
         if not math.isfinite(vpp) or vpp <= 0:
             return f"{vpp!r} Vpp is not a positive amplitude"
@@ -379,15 +379,10 @@ class BenchSpec(_Model):
             )
         piezo_V = 0.5 * vpp * peak_factor * self.amplifier.gain
         if piezo_V > self.amplifier.piezo_max * (1 + 1e-12):
-            unequal = (
-                f" (the burst's peaks are unequal, so it may reach x{peak_factor:.4g} of half "
-                "its Vpp)"
-                if peak_factor > 1.0 + 1e-9
-                else ""
-            )
+            unequal = unequal_peaks(peak_factor)
             return (
                 f"{vpp:.4g} Vpp gives up to {piezo_V:.4g} V at the piezo, above its limit "
-                f"{self.amplifier.piezo_max:.4g} V{unequal}"
+                f"{self.amplifier.piezo_max:.4g} V" + (f" ({unequal})" if unequal else "")
             )
         return None
 

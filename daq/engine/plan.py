@@ -150,7 +150,7 @@ def _check_amplitudes(pf: ProtocolFile, bf: BenchFile, vpp: NDArray[np.float64])
     """Each amplitude within the generator's and the piezo's limits, said in the unit the
     protocol used (Vpp, Vpk or a displacement) and naming the bench field that binds."""
     from instruments.burst import burst_samples
-    from instruments.keysight import arb_peak_factor
+    from instruments.keysight import arb_peak_factor, unequal_peaks
     from protocols.schema import amplitude_notation
 
     bench = bf.bench
@@ -195,15 +195,11 @@ def _check_amplitudes(pf: ProtocolFile, bf: BenchFile, vpp: NDArray[np.float64])
                 f"{gen_max:.4g} Vpp ({bench_name})"
             )
         else:
-            unequal = (
-                f"; the burst's peaks are unequal, so it may reach x{factor:.4g} of half its Vpp"
-                if factor > 1.0 + 1e-9
-                else ""
-            )
+            unequal = unequal_peaks(factor)
             why = (
                 f"it gives up to {0.5 * v * factor * amp.gain:.4g} V at the piezo, above "
                 f"amplifier.piezo_max {amp.piezo_max:.4g} V ({bench_name}, at gain "
-                f"{amp.gain:.4g}){unequal}"
+                f"{amp.gain:.4g})" + (f"; {unequal}" if unequal else "")
             )
         raise pf.error(
             ("amplitudes",),
