@@ -432,7 +432,8 @@ def burst_peak_factor(bf: BenchFile, test: BurstTest) -> float:
 
 def check_burst(bf: BenchFile, inst: BenchInstruments, test: BurstTest) -> list[Finding]:
     """Home, go to ``test.cylinder``, fire one burst; signal level, velocity and carrier.
-    Every instrument is left in its safe state."""
+    The caller brings the bench to its safe state and confirms it (:func:`safe_state_finding`),
+    also when this raises: ``biafc check`` does, in a ``finally``."""
     from instruments.burst import Burst
     from instruments.interfaces import AcquisitionConfig, BurstConfig
 
@@ -445,72 +446,65 @@ def check_burst(bf: BenchFile, inst: BenchInstruments, test: BurstTest) -> list[
         raise ValueError(why)
     channel = b.direction_channel[test.direction]  # type: ignore[index]
     gen, vib, stage, dig = inst.generator, inst.vibrometer, inst.stage, inst.digitiser
-    try:
-        stage.home()
-        stage.move_to(float(b.positions_m()[test.cylinder - 1]))
-        inst.wait(b.stage.settle, threading.Event())  # never set: the wait runs to its end
-        level = float(vib.signal_level())
-        good = level >= b.vibrometer.min_signal_level
-        out.append(
-            Finding(
-                "burst",
-                f"signal level at cylinder {test.cylinder}",
-                f">= {b.vibrometer.min_signal_level:g}",
-                f"{level:.2f}",
-                "ok" if good else "MISMATCH",
-                "the laser does not see the cylinder: check its position and the focus",
-            )
+    stage.home()
+    stage.move_to(float(b.positions_m()[test.cylinder - 1]))
+    inst.wait(b.stage.settle, threading.Event())  # never set: the wait runs to its end
+    level = float(vib.signal_level())
+    good = level >= b.vibrometer.min_signal_level
+    out.append(
+        Finding(
+            "burst",
+            f"signal level at cylinder {test.cylinder}",
+            f">= {b.vibrometer.min_signal_level:g}",
+            f"{level:.2f}",
+            "ok" if good else "MISMATCH",
+            "the laser does not see the cylinder: check its position and the focus",
         )
-        rate = min(test.rate_Hz, b.daq.max_rate)
-        n_pre = 100
-        n = n_pre + round(test.record_s * rate)
-        rate = dig.configure(
-            AcquisitionConfig(
-                sample_rate_Hz=rate,
-                n_samples=n,
-                n_pretrigger=n_pre,
-                velocity_channel=b.daq.velocity_channel,
-                reference_channel=b.daq.reference_channel,
-                velocity_range_V=b.daq.velocity_range,
-                reference_range_V=b.daq.reference_range,
-                trigger_source=b.daq.trigger,
-                timeout_s=2.0,
-            )
+    )
+    rate = min(test.rate_Hz, b.daq.max_rate)
+    n_pre = 100
+    n = n_pre + round(test.record_s * rate)
+    rate = dig.configure(
+        AcquisitionConfig(
+            sample_rate_Hz=rate,
+            n_samples=n,
+            n_pretrigger=n_pre,
+            velocity_channel=b.daq.velocity_channel,
+            reference_channel=b.daq.reference_channel,
+            velocity_range_V=b.daq.velocity_range,
+            reference_range_V=b.daq.reference_range,
+            trigger_source=b.daq.trigger,
+            timeout_s=2.0,
         )
-        shape = Burst(test.f_center_Hz, cycles=test.cycles)
-        gen.configure_burst(
-            channel,
-            BurstConfig(
-                shape=shape,
-                amplitude_Vpp=test.amplitude_Vpp,
-                sample_rate_Hz=b.generator.sample_rate,
-            ),
+    )
+    shape = Burst(test.f_center_Hz, cycles=test.cycles)
+    gen.configure_burst(
+        channel,
+        BurstConfig(
+            shape=shape,
+            amplitude_Vpp=test.amplitude_Vpp,
+            sample_rate_Hz=b.generator.sample_rate,
+        ),
+    )
+    load = _load_ohm(gen, channel)
+    high_z = load > 1e30
+    out.append(
+        Finding(
+            "burst",
+            f"output {channel} load",
+            "high Z (INF)",
+            _load_text(load),
+            "ok" if high_z else "MISMATCH",
+            "the amplifier input is high impedance: with another load setting the "
+            "piezo sees another voltage than the one asked for",
         )
-        load = _load_ohm(gen, channel)
-        high_z = load > 1e30
-        out.append(
-            Finding(
-                "burst",
-                f"output {channel} load",
-                "high Z (INF)",
-                _load_text(load),
-                "ok" if high_z else "MISMATCH",
-                "the amplifier input is high impedance: with another load setting the "
-                "piezo sees another voltage than the one asked for",
-            )
-        )
-        if not high_z:
-            raise ValueError(f"output {channel} load is {_load_text(load)}, not high Z")
-        gen.output(channel, True)
-        dig.arm()
-        gen.trigger()
-        rec = dig.read()
-    finally:
-        for i in (gen, stage, vib, dig):
-            try:
-                i.safe_state()
-            except Exception:
-                pass
+    )
+    if not high_z:
+        raise ValueError(f"output {channel} load is {_load_text(load)}, not high Z")
+    gen.output(channel, True)
+    dig.arm()
+    gen.trigger()
+    rec = dig.read()
     sens = float(vib.sensitivity_m_per_s_per_V())
     v = np.asarray(rec.velocity_V, dtype=np.float64)
     d = np.asarray(rec.reference_V, dtype=np.float64)
