@@ -583,27 +583,37 @@ class ZaberStage:
         self.command(f"move abs {self._steps(target_m)}")
         self._wait_idle(f"move abs {target_m * 1e3:.4f} mm", timeout)
 
-    def _wait_idle(
-        self, what: str, timeout_s: float, cancel: threading.Event | None = None
-    ) -> bool:
-        """Poll until idle (True); False when ``cancel`` was set (the axis stopped)."""
+    def _poll_idle(
+        self, timeout_s: float, *, check_flags: bool = True, cancel: threading.Event | None = None
+    ) -> bool | None:
+        """Poll ``get pos`` every ``poll_interval_s`` until the axis is idle (True), ``timeout_s``
+        has passed (False) or ``cancel`` is set (None); a fault flag raises with
+        ``check_flags``."""
         clock = self.settings.clock
         t_end = clock.now() + timeout_s
         while True:
             if cancel is not None and cancel.is_set():
-                self.stop()
-                return False
-            r = self.command("get pos")
-            if not r.busy:
+                return None
+            if not self.command("get pos", check_flags=check_flags).busy:
                 return True
             if clock.now() > t_end:
-                self.stop()
-                stopped = "stopped" if self._wait_rest() else "stop sent, still moving"
-                raise InstrumentTimeout(
-                    f"{self.transport.name}: {what} not finished within {timeout_s:.3g} s; "
-                    + stopped
-                )
+                return False
             clock.sleep(self.settings.poll_interval_s)
+
+    def _wait_idle(
+        self, what: str, timeout_s: float, cancel: threading.Event | None = None
+    ) -> bool:
+        """Poll until idle (True); False when ``cancel`` was set (the axis stopped)."""
+        idle = self._poll_idle(timeout_s, cancel=cancel)
+        if idle:
+            return True
+        self.stop()
+        if idle is None:
+            return False
+        stopped = "stopped" if self._wait_rest() else "stop sent, still moving"
+        raise InstrumentTimeout(
+            f"{self.transport.name}: {what} not finished within {timeout_s:.3g} s; " + stopped
+        )
 
     def stop(self) -> None:
         """Decelerate to a stop (``stop``, no message id: any reply will do); flags not checked.
@@ -620,14 +630,9 @@ class ZaberStage:
         return self.command("get pos", check_flags=False).busy
 
     def _wait_rest(self) -> bool:
-        """Poll until the axis is at rest (True), for at most ``stop_timeout_s``."""
-        s = self.settings
-        t_end = s.clock.now() + s.stop_timeout_s
-        while self.is_moving():
-            if s.clock.now() > t_end:
-                return False
-            s.clock.sleep(s.poll_interval_s)
-        return True
+        """Poll until the axis is at rest (True), for at most ``stop_timeout_s``; flags not
+        checked (a stall is a way to rest)."""
+        return bool(self._poll_idle(self.settings.stop_timeout_s, check_flags=False))
 
     def clear_warnings(self) -> list[str]:
         """``warnings clear`` (after a handled stall/limit fault); the flags it cleared."""
