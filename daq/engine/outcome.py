@@ -54,9 +54,9 @@ def unsafe_instruction(unconfirmed: list[str] | tuple[str, ...]) -> str:
     """What the person must do by hand when the safe state is not confirmed: the piezo
     amplifier as the alternative where a generator output is among them, the stage's
     controller where only the stage is."""
-    drive = any("generator" in u for u in unconfirmed)
-    where = " (or switch the piezo amplifier off) before touching the chain" if drive else ""
-    if not drive:
+    if any("generator" in u for u in unconfirmed):
+        where = " (or switch the piezo amplifier off) before touching the chain"
+    else:
         where = " before reaching into the stage's travel"
     return "SWITCH OFF BY HAND: " + "; ".join(unconfirmed) + where
 
