@@ -115,13 +115,16 @@ def run(args: argparse.Namespace) -> int:
             try:
                 try:
                     findings += preflight.check_burst(bf, inst, test)
-                except (InstrumentError, ValueError) as exc:
+                except Exception as exc:  # as the settings' (preflight._attempt): one line
+                    said = str(exc).splitlines()[0] if str(exc) else ""
+                    if not isinstance(exc, InstrumentError | ValueError):  # not foreseen: name it
+                        said = f"{type(exc).__name__}: {said}"
                     findings.append(
                         preflight.Finding(
                             "burst",
                             "one burst",
                             "",
-                            str(exc).splitlines()[0],
+                            said,
                             "MISMATCH",
                             "the burst test did not complete",
                         )

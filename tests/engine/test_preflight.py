@@ -149,7 +149,8 @@ def test_check_move_says_a_silent_stage_and_confirms_after_any_error(
 ) -> None:
     """A stage that does not answer whether it stopped read as 'confirmed' (exit 0); an error
     the burst test did not expect (an OSError, a stop signal) left without reading anything
-    back."""
+    back, and an OSError ended in a traceback: now a finding of one line, then the unsafe
+    end (exit 3)."""
     from daq import preflight
     from instruments.errors import InstrumentTimeout
 
@@ -172,10 +173,22 @@ def test_check_move_says_a_silent_stage_and_confirms_after_any_error(
 
     _connected(monkeypatch, stuck)
     monkeypatch.setattr(preflight, "check_burst", broken)
-    with pytest.raises(OSError):
-        main(["check", "--move", "--cylinder", "2"])
+    assert main(["check", "--move", "--cylinder", "2"]) == 3
+    out, err = capsys.readouterr()
+    assert "MISMATCH burst one burst: OSError: the card's driver crashed" in out, out
+    assert "biafc check: UNSAFE: SWITCH OFF BY HAND: stage controller" in err, err
+    assert "Traceback" not in out + err
+
+    def interrupted(*a: Any) -> Any:
+        raise KeyboardInterrupt
+
+    _connected(monkeypatch, stuck)
+    monkeypatch.setattr(preflight, "check_burst", interrupted)
+    # a stop signal still leaves at once (Ctrl-C: 130), said unsafe first
+    assert main(["check", "--move", "--cylinder", "2"]) == 130
     err = capsys.readouterr().err
     assert "biafc check: UNSAFE: SWITCH OFF BY HAND: stage controller" in err, err
+    assert err.rstrip().endswith("biafc check: interrupted"), err
 
 
 @pytest.mark.parametrize(
