@@ -101,13 +101,25 @@ class ScpiError(Exception):
         self.message = message
 
 
+#: The arb a channel holds after a reset or ``DATA:VOL:CLE`` ("Clears waveform memory for the
+#: specified channel and reloads the default waveform", the programming guide)
+DEFAULT_ARB = r"INT:\BUILTIN\EXP_RISE.ARB"
+
+
+def _exp_rise(n: int = 256) -> NDArray[np.float64]:
+    """A stand-in for the built-in EXP_RISE (its samples are not published): an exponential
+    rise over the record, normalised to -1..+1."""
+    rise = 1.0 - np.exp(-5.0 * np.linspace(0.0, 1.0, n))
+    return 2.0 * rise / rise[-1] - 1.0
+
+
 @dataclass
 class ChannelState:
     """One output channel (SI units; ``waveform`` normalised to +/-1)."""
 
     function: str = "SIN"
-    arb_name: str | None = None
-    waveform: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
+    arb_name: str = DEFAULT_ARB
+    waveform: NDArray[np.float64] = field(default_factory=_exp_rise)
     sample_rate_Hz: float = 40.0e3
     #: ``FUNC:ARB:FILT``: NORMal (the default), STEP or OFF
     arb_filter: str = "NORM"
@@ -285,6 +297,7 @@ class KeysightEmulator:
             return None
         if key == "DATA:VOL:CLE":
             self.volatile[n].clear()
+            ch.arb_name, ch.waveform = DEFAULT_ARB, _exp_rise()  # the old burst is gone
             return None
         if key == "DATA:ARB:DAC":
             self._arb_dac(n, arg, block)

@@ -115,3 +115,24 @@ def test_an_arb_filter_left_at_step_is_set_back_and_read_back() -> None:
     assert emu.channels[1].arb_filter == "NORM"
     held = gen.held(1)
     assert held is not None and held.arb_filter == "NORM"
+
+
+def test_clearing_the_volatile_memory_reloads_the_default_arb() -> None:
+    """DATA:VOL:CLE "clears waveform memory for the specified channel and reloads the default
+    waveform" (the guide): the emulator kept the cleared burst selected and playing, so a
+    configuration that failed after the clear would have found the old burst still there."""
+    emu = KeysightEmulator()
+    gen = on(emu)
+    gen.configure_burst(1, burst(2.0))
+    q, w = gen.transport.query, gen.transport.write
+    played = emu.channels[1].waveform.copy()
+    assert q("SOUR1:FUNC:ARB?") == '"BIAFC1"'
+    w("SOUR1:DATA:VOL:CLE")
+    assert q("SOUR1:FUNC:ARB?") == '"INT:\\BUILTIN\\EXP_RISE.ARB"'
+    now = emu.channels[1].waveform
+    assert now.size != played.size or not (now == played).all()
+    assert q("SYST:ERR?") == '+0,"No error"'
+    w("SOUR1:FUNC:ARB BIAFC1")  # gone with the clear
+    assert q("SYST:ERR?").startswith("-224,")
+    gen.configure_burst(1, burst(2.0))  # the driver's own order uploads it again
+    assert (emu.channels[1].waveform == played).all() and gen.errors() == []
