@@ -51,6 +51,7 @@ from analysis.model_run import (
     RunSetup,
     _on_time_axis,
     chain_spec_of_run,
+    model_duration_s,
     resonator_damping,
     run_setup,
     with_resonator_damping,
@@ -211,7 +212,7 @@ def linear_data(run: RunData, spec: ChainSpec, setup: RunSetup | None = None) ->
         lr = linear_response(
             chain,
             [unit],
-            duration_s=max(float(ds.time_s[-1]), 2.0 / ds.sample_rate_Hz),
+            duration_s=model_duration_s(float(ds.time_s[-1]), ds.sample_rate_Hz),
             sample_rate_Hz=ds.sample_rate_Hz,
             cylinders=[1],
             record=(),
@@ -407,7 +408,7 @@ class _Model:
             lr = linear_response(
                 chain,
                 [Drive(ds.direction, ds.kind, 1.0, ds.burst)],
-                duration_s=max(float(ds.time_s[-1]), 2.0 / ds.sample_rate_Hz),
+                duration_s=model_duration_s(float(ds.time_s[-1]), ds.sample_rate_Hz),
                 sample_rate_Hz=ds.sample_rate_Hz,
                 cylinders=[int(c) for c in ds.cylinders],
                 record=("velocity",),

@@ -18,7 +18,7 @@ from typing import Any, Literal, cast
 import numpy as np
 from numpy.typing import NDArray
 
-from analysis.model_run import _on_time_axis
+from analysis.model_run import _on_time_axis, model_duration_s
 from analysis.spectra import amplitude_spectrum, peak_frequency
 from instruments.burst import Burst
 from sim_backend.dem import ChainSpec, Drive, build_chain, simulate
@@ -151,7 +151,7 @@ class ModelOverlay:
         res = simulate(
             chain,
             [drive],
-            duration_s=max(float(time_s[-1]), 2.0 / rate),
+            duration_s=model_duration_s(float(time_s[-1]), rate),
             sample_rate_Hz=rate,
             record=("velocity",),
         )

@@ -217,6 +217,13 @@ def chain_spec_of_run(run: RunData) -> ChainSpec:
     )
 
 
+def model_duration_s(t_end_s: float, rate_Hz: float) -> float:
+    """The model's run length (s) whose samples at ``rate_Hz`` (S/s) reach a record's last time
+    ``t_end_s``: the models sample ``[0, duration]`` inclusive, and a duration of exactly
+    ``t_end`` could round one sample short (its last value then read 0); at least 2 samples."""
+    return max(t_end_s + 0.5 / rate_Hz, 2.0 / rate_Hz)
+
+
 def _on_time_axis(
     model_t: NDArray[np.float64], v: NDArray[np.float64], t: NDArray[np.float64]
 ) -> NDArray[np.float64]:
@@ -265,7 +272,7 @@ def predict(
     if not drives:
         return {}
     cylinders = sorted(cyl)
-    duration = max(t_end, 2.0 / rate)
+    duration = model_duration_s(t_end, rate)
     if solver == "dem":
         res = simulate(
             chain,

@@ -18,6 +18,7 @@ drive.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import functools
 import json
 import logging
@@ -31,6 +32,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from daq.engine.decoder_delay import tail_samples, undo_decoder_delay
 from daq.engine.events import EventBus, EventKind, RunEvent, RunState, Subscriber
 from daq.engine.instruments import BenchInstruments
 from daq.engine.keep_awake import cannot_line, keep_awake
@@ -202,6 +204,7 @@ class RunEngine:
         self._running.set()
         self._thread: threading.Thread | None = None
         self._writer: RunFileWriter | None = None
+        self._tail = 0  # samples read past each record's window (_configure_digitiser)
         self.result: RunResult | None = None
         #: True once the run is putting the bench in its safe state and closing the file
         self.ending = False
@@ -527,10 +530,16 @@ class RunEngine:
         if inst.vibrometer.velocity_range() != bench.vibrometer.range:
             inst.vibrometer.set_velocity_range(bench.vibrometer.range)
         cfg = self._acquisition_config()
+        # samples past the window, so that undoing the decoder's delay reads measured data
+        # to the window's last sample (decoder_delay.tail_samples)
+        delay = float(self._ask("vibrometer", inst.vibrometer.signal_delay_s))
+        self._tail = tail_samples(delay, cfg.sample_rate_Hz)
+        n_window = cfg.n_samples
+        cfg = dataclasses.replace(cfg, n_samples=n_window + self._tail)
         rate = float(self.instruments.digitiser.configure(cfg))
         self._rate_Hz = rate
         self._coerced = abs(rate - cfg.sample_rate_Hz) > 1e-6 * cfg.sample_rate_Hz
-        return (np.arange(cfg.n_samples) - cfg.n_pretrigger) / rate
+        return (np.arange(n_window) - cfg.n_pretrigger) / rate
 
     def _prepare(self, time_s: NDArray[np.float64]) -> None:
         """Outputs off, stage homed (logged in the open run file)."""
@@ -823,8 +832,8 @@ class RunEngine:
         sens = float(ask("vibrometer", inst.vibrometer.sensitivity_m_per_s_per_V))
         delay = float(ask("vibrometer", inst.vibrometer.signal_delay_s))
         clip_V = CLIP_FRACTION * bench.daq.velocity_range
-        v_sum = np.zeros_like(time_s)
-        d_sum = np.zeros_like(time_s)
+        v_sum = np.zeros(time_s.shape[0] + self._tail)
+        d_sum = np.zeros(time_s.shape[0] + self._tail)
         for _ in range(proto.averages):
             if self._abort.is_set():
                 raise _Aborted()
@@ -839,8 +848,9 @@ class RunEngine:
                 raise
             v = np.asarray(rec.velocity_V, dtype=np.float64)
             d = np.asarray(rec.reference_V, dtype=np.float64)
-            if v.shape != time_s.shape or d.shape != time_s.shape:
-                raise PointCheckError(f"record of {v.shape} samples, expected {time_s.shape}")
+            n_read = time_s.shape[0] + self._tail  # the window and its tail
+            if v.shape != (n_read,) or d.shape != (n_read,):
+                raise PointCheckError(f"record of {v.shape} samples, expected ({n_read},)")
             if not (np.all(np.isfinite(v)) and np.all(np.isfinite(d))):
                 raise PointCheckError("record holds NaN or infinite samples")
             if np.max(np.abs(v)) >= clip_V:
@@ -854,5 +864,6 @@ class RunEngine:
             raise InstrumentError(f"generator reported: {'; '.join(errs)}")
         v_mean = v_sum / proto.averages * sens
         if delay != 0.0:  # the decoder output lags: v_true(t) = v_out(t + delay)
-            v_mean = np.interp(time_s + delay, time_s, v_mean)
-        return v_mean, d_sum / proto.averages
+            v_mean = undo_decoder_delay(v_mean, self._rate_Hz, delay)
+        n = time_s.shape[0]
+        return v_mean[:n], d_sum[:n] / proto.averages
