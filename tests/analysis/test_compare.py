@@ -13,6 +13,7 @@ from analysis.compare_report import compare_run
 from analysis.model_run import run_setup
 from analysis.synthetic_scan import write_synthetic_scan
 from daq.cli.biafc import main as biafc
+from instruments.burst import Burst
 from protocols.runfile import PointState, read_run
 from sim_backend.dem import default_chain_spec
 
@@ -185,3 +186,28 @@ def test_a_far_cylinder_outside_the_protocol_is_unscanned_and_not_drawn(
     assert "compare_spectra_ltr" not in report.files and "compare_sweep" not in report.files
     assert "#31 is not in the run's protocol" in report.not_drawn["compare_spectra_ltr"]
     assert "compare_residuals" in report.files  # what can be compared still is
+
+
+def test_the_prediction_reaches_the_records_last_sample() -> None:
+    """The models sample [0, duration]; run for exactly a record's last time, at a rate read
+    from its time axis (499999.99999993 S/s for a 30 ms ``biafc simulate`` file), they stopped
+    a sample short, and the prediction's last value read 0 (a time-domain residual of 0.002
+    for a file compared with its own model)."""
+    from analysis.model_run import _on_time_axis, model_duration_s
+    from sim_backend.dem import Drive, build_chain
+    from sim_backend.dem.linear_response import linear_response
+
+    t = np.linspace(0.0, 0.03, 15001)  # as a simulate file's axis: 0 to 30 ms at 500 kS/s
+    rate = 1.0 / float(np.median(np.diff(t)))
+    drive = Drive("ltr", "displacement", 1e-8, Burst(8920.0))
+    lr = linear_response(
+        build_chain(default_chain_spec()),
+        [drive],
+        duration_s=model_duration_s(float(t[-1]), rate),
+        sample_rate_Hz=rate,
+        cylinders=[1],
+        record=("velocity",),
+    )
+    assert lr.velocity is not None and lr.time_s.size == t.size
+    v = _on_time_axis(lr.time_s, lr.velocity[0, 0], t)
+    assert v[-1] != 0.0 and abs(v[-1]) > 1e-3 * np.abs(v).max()
