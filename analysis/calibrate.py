@@ -47,6 +47,7 @@ from scipy.ndimage import gaussian_filter1d
 from scipy.optimize import least_squares
 
 from analysis.compare import point_states
+from analysis.fit_jacobian import LastValue, forward_jacobian
 from analysis.model_run import (
     RunSetup,
     _on_time_axis,
@@ -470,13 +471,17 @@ def calibrate(
     # with many local minima; smoothed, the landscape is that of the band edges and levels
     bin_Hz = _bin_width_Hz(data)
     model.set_smoothing(SMOOTH_HZ / bin_Hz)
+    # absolute steps in x = log(value / start) (analysis.fit_jacobian): relative ones vanish
+    # where the start values are right; a fresh memo for each stage's residuals
+    f1 = LastValue(model.residuals)
     coarse = least_squares(
-        model.residuals, x0, bounds=(lo, hi), method="trf", diff_step=1e-4,
+        f1, x0, jac=forward_jacobian(f1, 1e-4, hi), bounds=(lo, hi), method="trf",
         max_nfev=max_evaluations, xtol=1e-6, ftol=1e-6,
     )  # fmt: skip
     model.set_smoothing(0.0)
+    f2 = LastValue(model.residuals)
     sol = least_squares(
-        model.residuals, coarse.x, bounds=(lo, hi), method="trf", diff_step=1e-4,
+        f2, coarse.x, jac=forward_jacobian(f2, 1e-4, hi), bounds=(lo, hi), method="trf",
         max_nfev=max_evaluations, xtol=1e-10, ftol=1e-10,
     )  # fmt: skip
     values = model.values(sol.x)
@@ -494,8 +499,9 @@ def calibrate(
         else:
             x1 = np.asarray(sol.x, dtype=np.float64)
             d0 = float(np.linalg.norm(dm.residuals(x1))) / dm.norm
+            f3 = LastValue(dm.residuals)
             sol = least_squares(
-                dm.residuals, x1, bounds=(lo, hi), method="trf", diff_step=1e-3,
+                f3, x1, jac=forward_jacobian(f3, 1e-3, hi), bounds=(lo, hi), method="trf",
                 max_nfev=max_dem_evaluations, xtol=1e-8, ftol=1e-8,
             )  # fmt: skip
             values = dm.values(sol.x)
