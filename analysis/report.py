@@ -166,7 +166,8 @@ def write_figures(run: RunData, out_dir: str | Path) -> FigureReport:
                 (label, spatiotemporal_map(scan.velocity[a], scan.cylinders, scan.time_s))
             )
         limit = linear_limit_cylinder(scan.f_center_Hz, direction, onset, cutoff)
-        _save(report, plot_spatiotemporal(st_panels, limit), out, f"spatiotemporal_{direction}")
+        fig = plot_spatiotemporal(st_panels, limit, n_cylinders=len(onset))
+        _save(report, fig, out, f"spatiotemporal_{direction}")
 
     if sweeps:
         _save(report, plot_amplitude_sweep(sweeps), out, "amplitude_sweep")

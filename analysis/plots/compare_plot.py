@@ -17,6 +17,7 @@ from analysis.plots.style import (
     cell_edges,
     masked_cmap,
     new_figure,
+    on_every_cylinder,
     style,
 )
 from analysis.spatial import SpatialFrequencyMap
@@ -58,10 +59,11 @@ def plot_compare_spatial(
         for ax, smap, name in ((axs[0, 0], measured, "measured"), (axs[0, 1], predicted, "model")):
             add_gap_background(ax)
             f_khz = smap.freq_Hz / 1e3
+            x_edges, db = on_every_cylinder(smap.cylinders, spectrum_db(smap.magnitude, ref))
             mesh = ax.pcolormesh(
-                cell_edges(smap.cylinders),
+                x_edges,
                 cell_edges(f_khz),
-                spectrum_db(smap.magnitude, ref).T,
+                db.T,
                 cmap=masked_cmap("magma"),
                 vmin=-40,
                 vmax=0,
@@ -85,6 +87,7 @@ def plot_compare_spatial(
                         label=st,
                     )
             ax.set_ylim(f_khz[0], f_khz[-1])
+            ax.set_xlim(0.5, max(len(onset_Hz), int(smap.cylinders.max())) + 0.5)
             ax.set_xlabel("cylinder number")
             ax.set_title(f"{name}: {title}")
         axs[0, 0].set_ylabel("frequency (kHz)")

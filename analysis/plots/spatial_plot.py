@@ -14,6 +14,7 @@ from analysis.plots.style import (
     gap_legend_handle,
     masked_cmap,
     new_figure,
+    on_every_cylinder,
     style,
 )
 from analysis.spatial import SpatialFrequencyMap
@@ -43,9 +44,9 @@ def plot_spatial_frequency(
         )
         ax, side = axs[0, 0], axs[0, 1]
         add_gap_background(ax)
-        db = spectrum_db(smap.magnitude)
+        x_edges, db = on_every_cylinder(smap.cylinders, spectrum_db(smap.magnitude))
         mesh = ax.pcolormesh(
-            cell_edges(smap.cylinders),
+            x_edges,
             cell_edges(f_khz),
             db.T,
             cmap=masked_cmap("magma"),
@@ -82,7 +83,7 @@ def plot_spatial_frequency(
         ax.set_ylabel("frequency (kHz)")
         ax.set_title(title or f"{direction.upper()} spatial-frequency map")
         handles, _ = ax.get_legend_handles_labels()
-        if not np.all(ok):
+        if not np.all(ok) or np.unique(smap.cylinders).size < n:  # a gap shows
             handles.append(gap_legend_handle())
         ax.legend(handles=handles, loc="upper right", fontsize=8, framealpha=0.85)
         hits = np.nonzero(smap.cylinders == far)[0]
@@ -97,5 +98,6 @@ def plot_spatial_frequency(
         side.set_xlim(0, 1.05)
         side.set_xlabel("|V| (norm.)")
         side.set_title(f"far cylinder #{far}")
-        side.legend(loc="lower right", fontsize=8)
+        if side.get_legend_handles_labels()[0]:
+            side.legend(loc="lower right", fontsize=8)
     return fig

@@ -159,6 +159,21 @@ def gap_legend_handle() -> Patch:
     return Patch(facecolor="0.88", edgecolor="0.6", hatch="//", label=GAP_LABEL)
 
 
+def on_every_cylinder(
+    cylinders: Sequence[int] | NDArray[Any], rows: NDArray[Any]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Rows ``[C, ...]`` of the scanned ``cylinders [C]`` placed on every cylinder from the
+    first scanned to the last (``[M, ...]``, NaN where a cylinder was not scanned, so the gap
+    background shows), with unit-wide cell edges ``[M + 1]`` at ``cylinder +- 0.5``. Edges at
+    midpoints between scanned cylinders stretched cylinder 8's spectrum over cylinders 5-12 of
+    a scan of 1, 8 and 16."""
+    c = np.asarray(cylinders, dtype=np.int64)
+    lo, hi = int(c.min()), int(c.max())
+    full = np.full((hi - lo + 1, *rows.shape[1:]), np.nan)
+    full[c - lo] = rows
+    return np.arange(lo, hi + 2, dtype=np.float64) - 0.5, full
+
+
 def cell_edges(centres: Sequence[float] | NDArray[Any], log: bool = False) -> NDArray[np.float64]:
     """Cell edges ``[n + 1]`` around ``centres [n]`` (geometric midpoints when ``log``)."""
     c = np.asarray(centres, dtype=np.float64)
