@@ -813,6 +813,17 @@ class RunEngine:
             where = self._generator_name() if name == "generator" else name
             raise DeadInstrumentError(f"{where} stopped answering: {exc}") from exc
 
+    def _check_signal(self, point: Point, when: str = "") -> None:
+        """:class:`SignalLostError` when the vibrometer's signal level is below the bench's
+        ``vibrometer.min_signal_level``."""
+        level = float(self._ask("vibrometer", self.instruments.vibrometer.signal_level))
+        floor = self.bench_file.bench.vibrometer.min_signal_level
+        if level < floor:
+            raise SignalLostError(
+                f"vibrometer signal level {level:.2f} below {floor:.2f} at cylinder "
+                f"{point.cylinder}" + (f" ({when})" if when else "")
+            )
+
     def _acquire(
         self, point: Point, time_s: NDArray[np.float64]
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -823,12 +834,7 @@ class RunEngine:
         ask("stage", inst.stage.move_to, point.position_m)
         if not inst.wait(proto.settle, self._abort):
             raise _Aborted()
-        level = float(ask("vibrometer", inst.vibrometer.signal_level))
-        if level < bench.vibrometer.min_signal_level:
-            raise SignalLostError(
-                f"vibrometer signal level {level:.2f} below {bench.vibrometer.min_signal_level:.2f}"
-                f" at cylinder {point.cylinder}"
-            )
+        self._check_signal(point)
         sens = float(ask("vibrometer", inst.vibrometer.sensitivity_m_per_s_per_V))
         delay = float(ask("vibrometer", inst.vibrometer.signal_delay_s))
         clip_V = CLIP_FRACTION * bench.daq.velocity_range
@@ -846,6 +852,9 @@ class RunEngine:
                 # after every retry of every point timed out
                 ask("generator", inst.generator.wait_complete)
                 raise
+            # after each record as well: a signal lost while averaging left a point "done"
+            # at half its velocity (one of two records empty)
+            self._check_signal(point, "after a record")
             v = np.asarray(rec.velocity_V, dtype=np.float64)
             d = np.asarray(rec.reference_V, dtype=np.float64)
             n_read = time_s.shape[0] + self._tail  # the window and its tail

@@ -33,6 +33,10 @@ class Faults:
     generator_dead_after_reads: int | None = None  # the generator stops answering after N reads
     home_s: float = 0.0  # wall time homing takes (a cancel ends it, not homed)
     stage_keeps_moving: bool = False  # the axis still moves after stop (a controller fault)
+    signal_lost_after_reads: int | None = None  # the beam loses the surface after N reads
+
+    def signal_lost(self, reads: int) -> bool:
+        return self.signal_lost_after_reads is not None and reads >= self.signal_lost_after_reads
 
 
 @dataclass
@@ -137,7 +141,7 @@ class FakeVibrometer:
         return DELAY_S
 
     def signal_level(self) -> float:
-        return 0.9
+        return 0.0 if self.w.faults.signal_lost(self.w.reads) else 0.9
 
     def snapshot(self) -> dict[str, Any]:
         return {"range": self.w.range_name}
@@ -223,9 +227,10 @@ class FakeDigitiser:
         if w.faults.timeouts > 0:
             w.faults.timeouts -= 1
             raise InstrumentTimeout("fake digitiser: no trigger within the timeout")
+        lost = w.faults.signal_lost(w.reads)  # reads before this one
         w.reads += 1
         t = (np.arange(cfg.n_samples) - cfg.n_pretrigger) / cfg.sample_rate_Hz
-        if w.latched is None:
+        if w.latched is None or lost:
             v_true = np.zeros_like(t)
             ref = np.zeros_like(t)
             key: Any = ("quiet",)

@@ -84,6 +84,21 @@ def test_a_decoder_delay_between_samples_is_undone_without_low_passing(
     assert np.max(np.abs(got[-5:] - want[-5:])) < 5 * 1e-4 * SENS
 
 
+def test_a_signal_lost_while_averaging_fails_the_point_not_halves_it(
+    protocol, bench, out: Path
+) -> None:
+    """The signal level was read once, before the records: a beam that lost the surface after
+    the first of two records left the point "done" at half its velocity (a resume then kept
+    it). It is read after every record too."""
+    w = FakeWorld(faults=Faults(signal_lost_after_reads=1))
+    _, res, _, _ = _run(protocol, bench, out, w)
+    assert res.status != "complete"
+    scan = read_run(out).scans[next(iter(read_run(out).scans))]
+    assert scan.done.flat[0] == PointState.FAILED, scan.done
+    assert not np.any(scan.done == PointState.DONE)
+    assert any("signal level" in m and "after a record" in m for _, _, m in read_run(out).log)
+
+
 def test_timeout_once_is_retried_and_the_run_completes(protocol, bench, out: Path) -> None:
     w = FakeWorld(faults=Faults(timeouts=1))
     _, res, events, _ = _run(protocol, bench, out, w)
