@@ -75,9 +75,10 @@ def sim_world_config(
     except ValueError as exc:
         raise bf.doc.error(("simulation", "faults"), str(exc).removeprefix("faults: ")) from None
     cache: dict[str, Any] = {} if sim.dem_cache_MB is None else {"dem_cache_MB": sim.dem_cache_MB}
+    spec = chain_spec(bf)  # its own one-line error, naming the chain field (not "simulation")
     try:
         return SimWorldConfig(
-            chain_spec=chain_spec(bf),
+            chain_spec=spec,
             direction_channel={str(k): int(v) for k, v in b.direction_channel.items()},
             actuator=actuator,
             cylinder_positions_m=tuple(float(p) for p in b.positions_m()),

@@ -19,7 +19,7 @@ import numpy as np
 from protocols.bench import BenchFile, parse_bench
 from protocols.yamlfile import ConfigError
 
-__all__ = ["IGNORED_FIELDS", "bench_differences"]
+__all__ = ["IGNORED_FIELDS", "bench_differences", "chain_differences"]
 
 #: dotted fields that may differ between the start and a resume (they cannot change the data)
 IGNORED_FIELDS = (
@@ -86,3 +86,37 @@ def bench_differences(
         )
         diffs.append(f"cylinder positions differ at {k.size} cylinder(s) ({shown})")
     return diffs
+
+
+def chain_differences(
+    stored_chain_spec: dict[str, Any] | None, bench: BenchFile, source: str = "the file"
+) -> list[str]:
+    """Differences between the chain a simulated run was measured on (its snapshot's
+    ``simulation_model.chain_spec``) and the chain ``bench`` names now, one line each
+    (``"chain diameter: '13.6 mm' in the file, '12 mm' now (chain file mychain.yaml)"``).
+
+    The bench file names its chain by path, so an edited chain file left the bench's text
+    unchanged: a resumed run mixed two chains under one ``/chain``. Empty for a lab bench, a
+    file that recorded no chain, or the same chain; a chain that cannot be read now is one
+    line saying so."""
+    if bench.bench.simulation is None or not stored_chain_spec:
+        return []
+    from daq.chain_info import chain_spec
+    from protocols.yamlfile import ConfigError as _ConfigError
+    from sim_backend.dem import ChainSpec
+
+    where = f" (chain file {bench.bench.chain})" if bench.bench.chain else ""
+    try:
+        now = chain_spec(bench).model_dump()
+    except _ConfigError as exc:
+        return [f"the bench's chain cannot be read now ({str(exc).splitlines()[0]})"]
+    try:
+        then = ChainSpec.model_validate(stored_chain_spec).model_dump()
+    except ValueError:
+        return [f"the chain stored in {source} is unreadable"]
+    a, b = _flatten(then), _flatten(now)
+    return [
+        f"chain {key}: {_show(a.get(key))} in {source}, {_show(b.get(key))} now{where}"
+        for key in sorted(set(a) | set(b))
+        if a.get(key) != b.get(key)
+    ]

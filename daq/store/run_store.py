@@ -23,7 +23,7 @@ from typing import Any, Literal
 import numpy as np
 
 from daq.store.recover import clear_consistency_flags
-from daq.store.resume_check import bench_differences
+from daq.store.resume_check import bench_differences, chain_differences
 from daq.store.writable import cannot_write
 from protocols.bench import BenchFile
 from protocols.legacy import upgrade_protocol_text
@@ -195,6 +195,17 @@ def _protocol_differences(stored: ProtocolFile, given: ProtocolFile) -> list[str
     ]
 
 
+def _stored_chain_spec(snapshot_json: Any) -> dict[str, Any] | None:
+    """The simulated bench's chain as a run recorded it (``/snapshot``'s
+    ``simulation_model.chain_spec``), or None."""
+    try:
+        text = snapshot_json.decode() if isinstance(snapshot_json, bytes) else str(snapshot_json)
+        spec = json.loads(text).get("simulation_model", {}).get("chain_spec")
+    except (ValueError, AttributeError):
+        return None
+    return spec if isinstance(spec, dict) else None
+
+
 def check_resume(
     path: Path,
     pf: ProtocolFile,
@@ -225,6 +236,7 @@ def check_resume(
                     continue
                 g = f["scan"][d]
                 scans[d] = (g["amplitudes"][...], g["cylinders"][...], g["time"].shape[0])
+            snapshot_json = f["snapshot"].attrs.get("json", "{}") if "snapshot" in f else "{}"
     except RunFileError as exc:  # names the file
         raise StoreError(f"--resume: {str(exc).splitlines()[0]}") from None
     except (OSError, KeyError, ValueError, TypeError) as exc:  # h5py's, inside the file
@@ -253,6 +265,7 @@ def check_resume(
     diffs: list[str] = []
     if bench is not None:
         diffs = bench_differences(text["bench_yaml"], bench, str(path))
+        diffs += chain_differences(_stored_chain_spec(snapshot_json), bench, str(path))
         if diffs and not accept_bench_change:
             raise StoreError(
                 f"--resume: {path} was started on another bench ({len(diffs)} difference(s): "

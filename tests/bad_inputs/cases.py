@@ -280,6 +280,8 @@ CASES: tuple[Case, ...] = (
        "min_signal_level: 0.2\n  level_full_scale: 0", ("bench.yaml", "level_full_scale")),
     _b("sample_rate_0_unit", "generator sample_rate: 0 Sa/s", "sample_rate: 1 MSa/s",
        "sample_rate: 0 Sa/s", ("bench.yaml", "generator.sample_rate")),
+    _b("bench_chain_missing", "a simulated bench whose chain file does not exist",
+       "chain: null", "chain: nochain.yaml", ("error: bench.yaml:5: chain:", "nochain.yaml: cannot read")),
     _b("bench_name_newline", "a line break in the bench's name", "name: simulated bench",
        'name: "sim\\nbench"', ("bench.yaml", "name")),
     _b("generator_nyquist", "a 8.92 kHz burst from a 10 kSa/s generator waveform",

@@ -288,3 +288,41 @@ def test_in_use_by_names_a_live_writer_and_ignores_a_dead_one(tmp_path) -> None:
         live.kill()
         live.wait()
     assert in_use_by(f) is None
+
+
+def test_a_resume_after_the_chain_file_was_edited_is_refused_naming_the_chain(
+    proto_file, tmp_path, capsys
+) -> None:
+    """The bench names its chain by path: with the chain file edited between the start and a
+    resume, the bench's text was unchanged, the resume ran on the new chain and one file held
+    points of two chains under the first one's /chain (a second reader's fault campaign)."""
+    from pathlib import Path
+
+    import sim_backend.dem
+    from protocols.bench import default_bench_path
+
+    chain = Path(sim_backend.dem.__file__).parent / "chains" / "default.yaml"
+    (tmp_path / "mychain.yaml").write_text(chain.read_text())
+    text = default_bench_path().read_text().replace("chain: null", "chain: mychain.yaml")
+    bench = tmp_path / "bench.yaml"
+    bench.write_text(text)
+    failing = tmp_path / "failing.yaml"  # the stage stalls after two records
+    failing.write_text(
+        text.replace("faults: {}", "faults: {stage_stall: true, after_acquisitions: 4}")
+    )
+    f = tmp_path / "mix.h5"
+    assert rp.main([str(proto_file), "--bench", str(failing), "--out", str(f), "-q"]) == 1
+    done = int(np.sum(read_run(f).scans["ltr"].done == PointState.DONE))
+    assert done >= 1
+    edited = (tmp_path / "mychain.yaml").read_text().replace("13.6 mm", "12 mm")
+    (tmp_path / "mychain.yaml").write_text(edited)
+    capsys.readouterr()
+    args = [str(proto_file), "--bench", str(bench), "--resume", str(f), "-q"]
+    assert rp.main(args) == 2
+    last = _last_err(capsys)
+    assert "another bench" in last and "chain diameter: '13.6 mm' in" in last, last
+    assert "'12 mm' now (chain file mychain.yaml)" in last, last
+    assert int(np.sum(read_run(f).scans["ltr"].done == PointState.DONE)) == done  # untouched
+    assert rp.main([*args, "--accept-bench-change"]) == 0
+    overrides = json.loads(read_run(f).attrs["bench_overrides_json"])
+    assert any(d.startswith("chain diameter") for d in overrides[0]["differences"])
