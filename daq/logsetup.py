@@ -20,10 +20,12 @@ from typing import TextIO
 
 __all__ = [
     "LOGGER",
+    "HeldRunLog",
     "add_verbosity_arguments",
     "attach_run_log",
     "configure",
     "detach",
+    "hold_run_log",
     "log_path_for",
     "verbosity",
 ]
@@ -80,6 +82,48 @@ def log_path_for(run_path: str | Path) -> Path:
     return Path(run_path).with_suffix(".log")
 
 
+class HeldRunLog(logging.Handler):
+    """The log file beside a run file, opened only once the run file is this process's
+    (:meth:`open_file`, called by the run engine right after it locks the file). Until then
+    messages are held in memory; a run refused before it (another process writes the file,
+    a dead instrument at connect) writes nothing: before, its "starting" and "refused" lines
+    went into the other process's ``RUN.log``."""
+
+    def __init__(self, path: Path) -> None:
+        super().__init__(logging.INFO)
+        self.path = path
+        self.setFormatter(logging.Formatter(_FORMAT))
+        self._held: list[logging.LogRecord] = []
+        self._file: logging.FileHandler | None = None
+
+    def emit(self, record: logging.LogRecord) -> None:
+        if self._file is None:
+            self._held.append(record)
+        else:
+            self._file.emit(record)
+
+    def open_file(self) -> None:
+        """Open the log file (appending) and write the held messages to it; then every next
+        one goes there at once. (Not ``release``: that is ``logging.Handler``'s lock.)"""
+        with self.lock:  # type: ignore[union-attr]  # an RLock: emit may hold it
+            if self._file is not None:
+                return
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            f = logging.FileHandler(self.path, mode="a", encoding="utf-8", delay=False)
+            f.setLevel(logging.INFO)
+            f.setFormatter(self.formatter)
+            for record in self._held:
+                f.emit(record)
+            self._held.clear()
+            self._file = f
+
+    def close(self) -> None:
+        if self._file is not None:
+            self._file.close()
+        self._held.clear()
+        super().close()
+
+
 def attach_run_log(run_path: str | Path) -> logging.Handler:
     """Append every ``biafc`` message from INFO up to the log file beside ``run_path``;
     returns the handler (give it to :func:`detach` when the run ends)."""
@@ -90,6 +134,15 @@ def attach_run_log(run_path: str | Path) -> logging.Handler:
     handler = logging.FileHandler(path, mode="a", encoding="utf-8", delay=False)
     handler.setLevel(logging.INFO)
     handler.setFormatter(logging.Formatter(_FORMAT))
+    logger.addHandler(handler)
+    return handler
+
+
+def hold_run_log(run_path: str | Path) -> HeldRunLog:
+    """As :func:`attach_run_log`, but the file opens only at :meth:`HeldRunLog.open_file`."""
+    logger = logging.getLogger(LOGGER)
+    logger.setLevel(logging.DEBUG)
+    handler = HeldRunLog(log_path_for(run_path))
     logger.addHandler(handler)
     return handler
 

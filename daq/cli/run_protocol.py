@@ -25,7 +25,7 @@ import argparse
 import signal
 import sys
 import threading
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from types import FrameType
 from typing import Any, TextIO
@@ -300,11 +300,12 @@ def _execute(
     import logging
 
     from daq.engine.outcome import ExitCode, exit_code, final_line
-    from daq.logsetup import attach_run_log, detach
+    from daq.logsetup import detach, hold_run_log
     from protocols.left_open import exit_leaving_them, files_left_open
 
     log = logging.getLogger("biafc.run_protocol")
-    log_file = attach_run_log(out)  # RUN.log beside the run file: everything from INFO up
+    # RUN.log beside the run file, everything from INFO up: opened once the run file is ours
+    log_file = hold_run_log(out)
     log.info(
         "%s %s on %r into %s", "resuming" if resume else "starting", pf.protocol.name,
         bf.bench.name, out,
@@ -318,7 +319,9 @@ def _execute(
         announce_if_cold()
     try:
         try:
-            gate.engine, instruments = _connect(pf, bf, out, resume, seed, accept_bench_change)
+            gate.engine, instruments = _connect(
+                pf, bf, out, resume, seed, accept_bench_change, on_file_locked=log_file.open_file
+            )
         except _Interrupted as exc:
             print(
                 f"run_protocol: interrupted by {exc} while connecting the bench: nothing was "
@@ -326,6 +329,13 @@ def _execute(
                 file=sys.stderr,
             )
             return int(ExitCode.INTERRUPTED if str(exc) == "SIGINT" else ExitCode.FAILED)
+        except _ConnectFailed as exc:  # exit 1, as biafc check's "did not answer"
+            print(
+                f"run_protocol: cannot connect the bench: {exc}; nothing was switched on, no "
+                "file written",
+                file=sys.stderr,
+            )
+            return int(ExitCode.FAILED)
         engine = gate.engine
         gate.ran = True
         engine.subscribe(Progress(sys.stdout, quiet))
@@ -362,6 +372,10 @@ def _execute(
     return int(code)
 
 
+class _ConnectFailed(Exception):
+    """An instrument of the bench did not answer while connecting (one line)."""
+
+
 def _connect(
     pf: Any,
     bf: Any,
@@ -369,6 +383,7 @@ def _connect(
     resume: bool,
     seed: int | None,
     accept_bench_change: bool,
+    on_file_locked: Callable[[], None] | None = None,
 ) -> tuple[Any, Any]:
     from daq.connect import connect_bench
     from daq.engine import RunEngine
@@ -377,8 +392,10 @@ def _connect(
 
     try:
         instruments = connect_bench(bf, seed=seed)
-    except (ConfigError, InstrumentError) as exc:
+    except ConfigError as exc:  # the bench file, a driver not installed, the bench in use
         raise CliError(str(exc).splitlines()[0]) from None
+    except InstrumentError as exc:  # an instrument that does not answer: not a refused request
+        raise _ConnectFailed(str(exc).splitlines()[0]) from None
     engine = RunEngine(
         pf,
         bf,
@@ -387,6 +404,7 @@ def _connect(
         resume=resume,
         seed=seed,
         accept_bench_change=accept_bench_change,
+        on_file_locked=on_file_locked,
     )
     return engine, instruments
 

@@ -185,7 +185,11 @@ class RunEngine:
         resume: bool = False,
         seed: int | None = None,
         accept_bench_change: bool = False,
+        on_file_locked: Callable[[], None] | None = None,
     ) -> None:
+        """``on_file_locked``: called once the run file is this process's (its lock taken),
+        before anything is written to it; ``run_protocol`` opens its log file then."""
+        self.on_file_locked = on_file_locked
         self.protocol_file = protocol
         self.bench_file = bench
         self.instruments = instruments
@@ -567,6 +571,8 @@ class RunEngine:
             self._file_lock = RunFileLock(self.out_path).acquire()
         except FileInUse as exc:
             raise RequestRefused(str(exc)) from None
+        if self.on_file_locked is not None:
+            self.on_file_locked()
         if self.resume_mode:
             # the axes come from the file; the instruments are set up after the checks
             from daq.store import StoreError

@@ -263,14 +263,14 @@ def test_a_vibrometer_that_stops_answering_stops_the_run_at_once(
 
     def silent(self) -> float:  # type: ignore[no-untyped-def]
         asked.append(1)
-        if len(asked) > 2:
+        if len(asked) > 6:  # asked before a point's first record and after each of its two
             raise InstrumentTimeout("vibrometer: no reply to 'Get,Controller,0,SignalLevel'")
         return 0.9
 
     monkeypatch.setattr(FakeVibrometer, "signal_level", silent)
     res = RunEngine(protocol, bench, fake_bench(FakeWorld()), out).run()
     assert res.status == "failed" and "vibrometer stopped answering" in res.reason
-    assert len(asked) == 3  # not three timeouts per point for every point left
+    assert len(asked) == 7  # not three timeouts per point for every point left
     assert res.n_failed == 0 and res.n_measured_now == 2
     assert res.safe_state_s is not None  # the generator confirmed its outputs off
 
@@ -326,3 +326,51 @@ def test_a_resume_after_the_chain_file_was_edited_is_refused_naming_the_chain(
     assert rp.main([*args, "--accept-bench-change"]) == 0
     overrides = json.loads(read_run(f).attrs["bench_overrides_json"])
     assert any(d.startswith("chain diameter") for d in overrides[0]["differences"])
+
+
+def test_a_run_refused_at_the_files_lock_writes_nothing_into_its_log(
+    proto_file, tmp_path, capsys, monkeypatch
+) -> None:
+    """Two runs started at once on one file both pass the request's checks; the one refused at
+    the run file's lock wrote its "starting" and "refused" lines into the other's RUN.log. The
+    log opens only once the run file is this process's."""
+    from daq.logsetup import log_path_for
+    from daq.store.lock import RunFileLock
+
+    f = tmp_path / "race.h5"
+    held: list[RunFileLock] = []
+
+    def other_wins(bf, seed=None, **k):  # type: ignore[no-untyped-def]
+        held.append(RunFileLock(f).acquire())  # the other run, after this one's checks
+        return fake_bench(FakeWorld())
+
+    monkeypatch.setattr(daq.connect, "connect_bench", other_wins)
+    try:
+        assert rp.main([str(proto_file), "--out", str(f), "--quiet"]) == 2
+        assert "refused" in _last_err(capsys)
+        assert not log_path_for(f).exists()
+    finally:
+        held[0].release()
+    _use(monkeypatch, FakeWorld())
+    assert rp.main([str(proto_file), "--out", str(f), "--quiet"]) == 0
+    text = log_path_for(f).read_text()
+    assert text.count("starting") == 1 and "(exit 2)" not in text and "(exit 0)" in text
+
+
+def test_an_instrument_that_does_not_answer_at_connect_is_exit_1_not_a_refusal(
+    proto_file, tmp_path, capsys, monkeypatch
+) -> None:
+    from daq.logsetup import log_path_for
+    from instruments.errors import InstrumentTimeout
+
+    def dead(bf, seed=None, **k):  # type: ignore[no-untyped-def]
+        raise InstrumentTimeout("generator (TCPIP0::1.2.3.4::INSTR): no reply to '*IDN?'")
+
+    monkeypatch.setattr(daq.connect, "connect_bench", dead)
+    f = tmp_path / "dead.h5"
+    assert rp.main([str(proto_file), "--out", str(f), "--quiet"]) == 1
+    last = _last_err(capsys)
+    assert last.startswith("run_protocol: cannot connect the bench: generator (TCPIP0"), last
+    assert last.endswith("nothing was switched on, no file written")
+    assert not f.exists(), "file"
+    assert not log_path_for(f).exists(), log_path_for(f).read_text()
