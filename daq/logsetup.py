@@ -82,6 +82,34 @@ def log_path_for(run_path: str | Path) -> Path:
     return Path(run_path).with_suffix(".log")
 
 
+def _say_once(path: Path, exc: BaseException) -> None:
+    """One line on stderr for a log file that cannot be written (not logging's traceback)."""
+    why = getattr(exc, "strerror", None) or exc
+    try:
+        print(
+            f"biafc: the log file {path} cannot be written ({why}); the run file's /log keeps "
+            "the messages",
+            file=sys.stderr,
+            flush=True,
+        )
+    except (OSError, ValueError):
+        pass
+
+
+class _OnceFileHandler(logging.FileHandler):
+    """A log file whose write errors (a folder turned read-only, a full disk) are said in one
+    line, once, instead of a traceback per message; the messages stay in the run file's /log."""
+
+    def __init__(self, path: Path) -> None:
+        super().__init__(path, mode="a", encoding="utf-8", delay=False)
+        self._said = False
+
+    def handleError(self, record: logging.LogRecord) -> None:
+        if not self._said:
+            self._said = True
+            _say_once(Path(self.baseFilename), sys.exc_info()[1] or OSError("write failed"))
+
+
 class HeldRunLog(logging.Handler):
     """The log file beside a run file, opened only once the run file is this process's
     (:meth:`open_file`, called by the run engine right after it locks the file). Until then
@@ -94,7 +122,7 @@ class HeldRunLog(logging.Handler):
         self.path = path
         self.setFormatter(logging.Formatter(_FORMAT))
         self._held: list[logging.LogRecord] = []
-        self._file: logging.FileHandler | None = None
+        self._file: logging.Handler | None = None
 
     def emit(self, record: logging.LogRecord) -> None:
         if self._file is None:
@@ -108,8 +136,14 @@ class HeldRunLog(logging.Handler):
         with self.lock:  # type: ignore[union-attr]  # an RLock: emit may hold it
             if self._file is not None:
                 return
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-            f = logging.FileHandler(self.path, mode="a", encoding="utf-8", delay=False)
+            try:
+                self.path.parent.mkdir(parents=True, exist_ok=True)
+                f = _OnceFileHandler(self.path)
+            except OSError as exc:  # a folder that turned read-only: the run file's /log has it
+                _say_once(self.path, exc)
+                self._held.clear()
+                self._file = logging.NullHandler()
+                return
             f.setLevel(logging.INFO)
             f.setFormatter(self.formatter)
             for record in self._held:
@@ -119,7 +153,10 @@ class HeldRunLog(logging.Handler):
 
     def close(self) -> None:
         if self._file is not None:
-            self._file.close()
+            try:
+                self._file.close()
+            except (OSError, ValueError):  # its last flush on a full disk: said already
+                pass
         self._held.clear()
         super().close()
 

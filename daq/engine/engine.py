@@ -426,7 +426,15 @@ class RunEngine:
                     if status == "complete":
                         status = "failed"
             if self._file_lock is not None:
-                self._file_lock.release()
+                try:
+                    self._file_lock.release()
+                except OSError as exc:  # the folder turned read-only: the outcome still stands
+                    self._log(
+                        "warning",
+                        f"the run file's lock {self._file_lock.lock} could not be removed "
+                        f"({exc.strerror or exc}); a later run takes it over (its process has "
+                        "ended)",
+                    )
             self._set_state(RunState(status))
             self.result = RunResult(
                 status,

@@ -60,3 +60,58 @@ def test_resume_appends_to_the_same_log(tmp_path: Path) -> None:
         detach(h)
     lines = log_path_for(run).read_text().splitlines()
     assert [ln.rsplit(": ", 1)[1] for ln in lines] == ["first", "second"]
+
+
+def test_a_folder_turned_read_only_at_the_end_keeps_the_outcome(  # type: ignore[no-untyped-def]
+    proto: Path, tmp_path: Path, capsys, monkeypatch
+) -> None:
+    """A second reader remounted the output folder read-only mid-run: the lock's removal then
+    raised, the outcome and the last line were lost to a traceback (exit 1 for a complete run,
+    the file's status 'running'), and the log printed logging's traceback per message."""
+    import errno
+
+    from daq.store.lock import RunFileLock
+    from protocols.runfile import read_run
+
+    def read_only(self) -> None:  # type: ignore[no-untyped-def]
+        raise OSError(errno.EROFS, "Read-only file system", str(self.lock))
+
+    monkeypatch.setattr(RunFileLock, "release", read_only)
+    out = tmp_path / "ro.h5"
+    assert rp.main([str(proto), "--out", str(out), "-q"]) == 0
+    captured = capsys.readouterr()
+    assert captured.out.strip().startswith("complete: 12 points")
+    assert "Traceback" not in captured.err
+    assert read_run(out).status == "complete"
+    assert "could not be removed (Read-only file system)" in log_path_for(out).read_text()
+
+
+def test_a_log_file_that_cannot_be_written_is_said_once(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
+    from daq.logsetup import hold_run_log
+
+    class Broken:
+        def write(self, text: str) -> None:
+            raise OSError(28, "No space left on device")
+
+        def flush(self) -> None:
+            raise OSError(28, "No space left on device")
+
+    h = hold_run_log(tmp_path / "full.h5")
+    log = logging.getLogger(f"{LOGGER}.test")
+    log.info("held")
+    h.open_file()
+    assert "held" in (tmp_path / "full.log").read_text()
+    h._file.stream = Broken()  # type: ignore[union-attr]
+    for i in range(3):
+        log.info("message %d", i)
+    err = capsys.readouterr().err
+    assert err.count("cannot be written (No space left on device)") == 1, err
+    assert "Traceback" not in err and "Logging error" not in err
+    detach(h)
+    blocked = tmp_path / "afile"
+    blocked.write_text("")
+    h = hold_run_log(blocked / "x.h5")  # its folder is a file: cannot be opened
+    log.info("lost")
+    h.open_file()
+    assert "x.log cannot be written" in capsys.readouterr().err
+    detach(h)
