@@ -18,7 +18,7 @@ import math
 from pathlib import Path
 
 from daq.cli.biafc import CliError
-from daq.cli.out_check import can_write
+from daq.cli.out_check import can_write, can_write_folder
 
 __all__ = ["add_arguments", "run"]
 
@@ -61,7 +61,7 @@ def run(args: argparse.Namespace) -> int:
     data, spec = read_run_and_chain(path, args.chain)
     can_write(args.out or path.with_name(f"{path.stem}_fitted_chain.yaml"), "--out")
     if args.figures is not None:
-        can_write(args.figures, "--figures")
+        can_write_folder(args.figures, "--figures")
     try:
         result = calibrate(data, names, chain_spec=spec, nonlinear=args.nonlinear)
     except CalibrationError as exc:

@@ -16,7 +16,7 @@ import argparse
 from pathlib import Path
 
 from daq.cli.biafc import CliError
-from daq.cli.out_check import can_write
+from daq.cli.out_check import can_write_folder
 
 __all__ = ["add_arguments", "parse_stroke", "run"]
 
@@ -55,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
     data, spec = read_run_and_chain(path, args.chain)
     stroke = parse_stroke(args.piezo_stroke) if args.piezo_stroke else None
     out = args.out or path.with_name(f"{path.stem}_compare")
-    can_write(out, "--out")  # before the model runs, not after
+    can_write_folder(out, "--out")  # before the model runs, not after
     try:
         report = compare_run(
             data,

@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from daq.cli.biafc import CliError
-from daq.cli.out_check import can_write
+from daq.cli.out_check import can_write_folder
 
 if TYPE_CHECKING:
     from protocols.studyfile import StudyData
@@ -120,7 +120,7 @@ def _alpha_sweep(args: argparse.Namespace) -> int:
             raise CliError("--cycles: must be > 0")
         kwargs["cycles"] = float(args.cycles)
     out = args.out or Path("alpha_sweep_figures")
-    can_write(out, "--out")
+    can_write_folder(out, "--out")
     try:
         result = alpha_sweep.run_alpha_sweep(**kwargs)  # type: ignore[arg-type]
     except ValueError as exc:
@@ -160,7 +160,7 @@ def run(args: argparse.Namespace) -> int:
     from analysis.report import write_figures
 
     out = args.out or path.with_name(f"{path.stem}_figures")
-    can_write(out, "--out")
+    can_write_folder(out, "--out")
     try:
         report = write_figures(data, out)
     except ValueError as exc:
@@ -222,7 +222,7 @@ def _study_figures(args: argparse.Namespace, path: Path, data: StudyData) -> int
     from instruments.units import format_quantity
 
     out = args.out or path.with_name(f"{path.stem}_figures")
-    can_write(out, "--out")
+    can_write_folder(out, "--out")
     fixed = _parse_fix(args.fix, str(data.attrs.get("amplitude_kind", "displacement")))
     done = int((data.status != 0).sum())
     print(f"{path}: study {data.attrs.get('name')}, {done} of {data.n_cells} cells run "

@@ -9,7 +9,7 @@ from pathlib import Path
 from daq.cli.biafc import CliError
 from daq.store.writable import cannot_write
 
-__all__ = ["can_write"]
+__all__ = ["can_write", "can_write_folder"]
 
 
 def can_write(target: Path, flag: str) -> None:
@@ -17,3 +17,12 @@ def can_write(target: Path, flag: str) -> None:
     problem = cannot_write(Path(target), flag)
     if problem is not None:
         raise CliError(problem)
+
+
+def can_write_folder(target: Path, flag: str) -> None:
+    """As :func:`can_write`, for a folder the command writes its files into: an existing file
+    of that name is refused too (it ended in a ``FileExistsError`` traceback, after the work)."""
+    target = Path(target)
+    if target.exists() and not target.is_dir():
+        raise CliError(f"{flag}: {target} is a file; give a folder to write into")
+    can_write(target, flag)

@@ -19,7 +19,8 @@ from typing import Any, Literal
 import numpy as np
 
 from daq.cli.biafc import CliError
-from daq.cli.out_check import can_write
+from daq.cli.out_check import can_write_folder
+from daq.cli.simulate_request import simulate_request_error
 from instruments.burst import NAMED_BURSTS
 from instruments.units import UnitError, parse_quantity
 
@@ -88,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
     run_path = out / "regime.h5"
     if run_path.exists():
         raise CliError(f"--out: {run_path} exists already")
-    can_write(out, "--out")  # before the model runs, not after
+    can_write_folder(out, "--out")  # before the model runs, not after
     try:
         spec = dem.load_chain_with_settings(args.chain, args.settings)
     except dem.ChainFileError as exc:
@@ -103,6 +104,13 @@ def run(args: argparse.Namespace) -> int:
         for d in directions
         for a in amps
     ]
+    option = "--burst" if args.burst else "--cycles"
+    for d in directions:
+        why = simulate_request_error(
+            duration, rate, bursts[d], len(drives) * (chain.n + 1), burst_option=option
+        )
+        if why is not None:
+            raise CliError(why)
     print(
         f"regime: {len(drives)} DEM runs in one batch ({args.count} amplitudes "
         f"{lo * 1e6:g}-{hi * 1e6:g} um x 2 directions, {cycles:g}-cycle bursts), "

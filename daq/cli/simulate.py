@@ -24,6 +24,7 @@ import numpy as np
 
 from daq.cli.biafc import CliError
 from daq.cli.out_check import can_write
+from daq.cli.simulate_request import simulate_request_error, within
 from instruments.burst import NAMED_BURSTS
 from instruments.units import UnitError, parse_quantity
 from sim_backend.dem.integrators import integrator_error
@@ -130,6 +131,17 @@ def _burst(args: argparse.Namespace, f_c: float) -> Any:
     return Burst(f_c, cycles=args.cycles if args.cycles is not None else NARROWBAND_CYCLES)
 
 
+def _burst_option(args: argparse.Namespace) -> str:
+    """The option that set the burst's length (the frequency when none did)."""
+    for option, value in (
+        ("--width", args.width), ("--sigma-f", args.sigma_f), ("--burst", args.burst),
+        ("--cycles", args.cycles),
+    ):  # fmt: skip
+        if value is not None:
+            return option
+    return "--frequency"
+
+
 def _describe(burst: Any) -> str:
     length = (
         f"{burst.cycles:g} cycles"
@@ -170,7 +182,18 @@ def run(args: argparse.Namespace) -> int:
     if not 1 <= args.bands <= chain.n_modes + 1:
         raise CliError(f"--bands: must be in 1..{chain.n_modes + 1}")
     bands = dem.quasi_bands(chain, args.bands)
-    burst = _burst(args, f_c if f_c is not None else DEFAULT_F_HZ[args.direction])
+    f_center = f_c if f_c is not None else DEFAULT_F_HZ[args.direction]
+    why = within("--frequency", f_center, "f_center", "frequency")
+    if why is not None:
+        raise CliError(why)
+    try:
+        burst = _burst(args, f_center)
+    except ValueError as exc:  # instruments.burst's own refusal
+        raise CliError(str(exc).splitlines()[0]) from None
+    option = _burst_option(args)
+    why = simulate_request_error(duration, rate, burst, chain.n + 1, burst_option=option)
+    if why is not None:
+        raise CliError(why)
     drive = dem.Drive(direction=args.direction, kind=kind, amplitude=amplitude, burst=burst)
     if args.explain:  # the plan only: sim_backend.dem.scene decides, nothing runs
         from sim_backend.dem.scene import Scene, plan_scene
@@ -336,7 +359,12 @@ def _run_full(
         raise CliError(f"--dt: {exc}") from None
     meta = res.meta
     if not meta["finite"]:
-        raise CliError("simulation diverged (non-finite velocity); try a smaller --dt")
+        raise CliError(
+            "simulation diverged (non-finite velocity): try a smaller --dt, or a smaller "
+            f"--amplitude ({args.amplitude} drives the chain far beyond its static overlap)"
+            if args.dt is None
+            else "simulation diverged (non-finite velocity); try a smaller --dt or --amplitude"
+        )
     return res, {
         "integrator": meta["integrator"],
         "order": int(meta["order"]),

@@ -1,0 +1,95 @@
+"""What ``biafc simulate`` refuses before the model runs: the protocol's bounds on the record
+and the burst (:data:`protocols.schema.BOUNDS`), the burst within the run and below the
+record's Nyquist frequency, and the memory the run would hold.
+
+Before, only "> 0" was checked: ``--duration 100s`` at 500 kS/s grew to 24 GB and the host's
+out-of-memory killer ended it (and shook every other process on the machine); ``--frequency
+1MHz`` at 500 kS/s, a burst longer than the run or wider than its centre frequency ran and wrote
+a file of aliased or clipped data. Each refusal is one line naming the option, the value and
+the range.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from instruments.units import format_quantity
+from protocols.schema import BOUNDS
+
+#: the largest output of ``biafc simulate`` (the velocity of every cylinder and the drive,
+#: float64): a run holds about four times its output while it runs (1.1 GB resident for 256 MB
+#: of output, 2 s at 500 kS/s), so this bound keeps a run near 2 GB
+MAX_SIMULATE_BYTES = 2**29
+
+
+def _show(x: float, dimension: str) -> str:
+    return format_quantity(x, dimension) if dimension else f"{x:g}"
+
+
+def within(option: str, value: float, bound: str, dimension: str) -> str | None:
+    """Why ``value`` (SI) of ``option`` is outside the protocol's :data:`BOUNDS` ``[bound]``,
+    or None."""
+    lo, hi = BOUNDS[bound]
+    if math.isfinite(value) and lo <= value <= hi:
+        return None
+    return (
+        f"{option}: {_show(value, dimension)} is outside "
+        f"{_show(lo, dimension)} .. {_show(hi, dimension)}"
+    )
+
+
+def simulate_request_error(
+    duration_s: float,
+    rate_Hz: float,
+    burst: Any,
+    n_records: int,
+    *,
+    burst_option: str = "--frequency",
+) -> str | None:
+    """Why a run of ``duration_s`` (s) at ``rate_Hz`` (S/s) with ``burst``
+    (``instruments.burst.Burst``) recording ``n_records`` traces (every cylinder and the drive,
+    of every trajectory of a batch) cannot be simulated, or None.
+    ``burst_option``: the option that set the burst's length (``--cycles``, ``--width``,
+    ``--sigma-f``, ``--burst``), named when the burst does not fit the run."""
+    for why in (
+        within("--duration", duration_s, "duration", "time"),
+        within("--rate", rate_Hz, "rate", "sample_rate"),
+        within("--frequency", burst.f_center_Hz, "f_center", "frequency"),
+    ):
+        if why is not None:
+            return why
+    if burst.cycles is not None:
+        why = within("--cycles", float(burst.cycles), "cycles", "")
+        if why is not None:
+            return why
+    if not burst.sigma_f_Hz < burst.f_center_Hz:
+        return (
+            f"{burst_option}: the burst's spectral width "
+            f"{format_quantity(burst.sigma_f_Hz, 'frequency')} is not below its centre "
+            f"frequency {format_quantity(burst.f_center_Hz, 'frequency')}; give a longer burst"
+        )
+    if burst.duration_s > duration_s:
+        return (
+            f"{burst_option}: the burst lasts {format_quantity(burst.duration_s, 'time')}, "
+            f"longer than the run (--duration {format_quantity(duration_s, 'time')})"
+        )
+    f_top = burst.f_center_Hz + 3.0 * burst.sigma_f_Hz
+    if f_top >= rate_Hz / 2:
+        return (
+            f"--frequency: the {format_quantity(burst.f_center_Hz, 'frequency')} burst (up to "
+            f"{format_quantity(f_top, 'frequency')} with its band) is above the Nyquist "
+            f"frequency {format_quantity(rate_Hz / 2, 'frequency')} of --rate "
+            f"{format_quantity(rate_Hz, 'sample_rate')}; record at more than "
+            f"{format_quantity(2 * f_top, 'sample_rate')} or lower --frequency"
+        )
+    samples = math.floor(duration_s * rate_Hz) + 1
+    data = samples * n_records * 8
+    if data > MAX_SIMULATE_BYTES:
+        return (
+            f"--duration: the run's output would be {data / 2**20:,.0f} MiB ({samples:,} "
+            f"samples x {n_records} records x 8 bytes, about four times that in memory "
+            f"while it runs), above the bound of {MAX_SIMULATE_BYTES / 2**20:g} MiB; shorten "
+            "--duration or lower --rate"
+        )
+    return None
