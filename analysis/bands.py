@@ -136,6 +136,8 @@ def peak_search_range_Hz(
     ``f_in_Hz`` and the highest cutoff: the band and its neighbourhood, leaving out the
     low-frequency drift of opened contacts and the harmonics.
     """
+    if not (np.any(np.isfinite(onset_Hz)) and np.any(np.isfinite(cutoff_Hz))):  # no band
+        return 0.5 * f_in_Hz, 1.5 * f_in_Hz
     lo = min(f_in_Hz, float(np.nanmin(onset_Hz)))
     hi = max(f_in_Hz, float(np.nanmax(cutoff_Hz)))
     if not (math.isfinite(lo) and math.isfinite(hi)):

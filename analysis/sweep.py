@@ -94,7 +94,10 @@ def input_frequency_Hz(scan: ScanData) -> NDArray[np.float64]:
 def amplitude_sweep(scan: ScanData, chain: ChainInfo) -> AmplitudeSweep:
     """The amplitude sweep of one direction (see the module docstring)."""
     n = len(chain.lengths_m)
-    onset, cutoff = band_edges(chain)
+    try:
+        onset, cutoff = band_edges(chain)
+    except ValueError:  # no local-resonance band (preload 0 N): the peak searched near f_in
+        onset = cutoff = np.full(n, np.nan)
     entry = entry_cylinder(scan.direction, n)
     far = far_cylinder(scan.direction, n)
     rate = scan.sample_rate_Hz

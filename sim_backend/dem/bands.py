@@ -89,7 +89,8 @@ def quasi_bands(chain: Chain, n_bands: int = 3) -> Bands:
     a = s[:, :, None] * stiff * s[:, None, :]  # M^-1/2 K M^-1/2
     free = np.sqrt(np.clip(np.linalg.eigvalsh(a), 0.0, None))  # 0 (rigid), then the onsets
     a[:, 0, 0] += 4.0 * chain.K_lin * s[:, 0] ** 2
-    held = np.sqrt(np.linalg.eigvalsh(a))  # the cutoffs
+    # the cutoffs; with K_lin = 0 (preload 0 N) the lowest is 0 and round-off made it -1e-9
+    held = np.sqrt(np.clip(np.linalg.eigvalsh(a), 0.0, None))
     onset = free[:, :n_bands].copy()
     onset[:, 0] = 0.0
     return Bands(onset / (2.0 * math.pi), held[:, :n_bands] / (2.0 * math.pi))
