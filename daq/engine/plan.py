@@ -80,6 +80,7 @@ def make_plan(pf: ProtocolFile, bf: BenchFile) -> Plan:
     vpp = np.array([bench.generator_Vpp(a, kind) for a in amps])
     _check_amplitudes(pf, bf, vpp)
     n = bench.n_cylinders
+    _check_model_cylinders(bf)
     cyl = proto.cylinder_numbers(n)
     bad = [int(c) for c in cyl if not 1 <= c <= n]
     if bad:
@@ -272,6 +273,25 @@ def _generator_limits(bf: BenchFile) -> Any:
         amplifier_gain=b.amplifier.gain,
         max_amplitude_Vpp=b.generator.max_amplitude,
     )
+
+
+def _check_model_cylinders(bf: BenchFile) -> None:
+    """A simulated bench places as many cylinders as its chain has: more positions than the
+    model's cylinders passed the dry run and failed the run at the first extra one (an
+    IndexError); fewer left the model's far end unmeasurable."""
+    if bf.bench.simulation is None:
+        return
+    from daq.chain_info import chain_spec
+    from sim_backend import dem
+
+    n_model = dem.build_chain(chain_spec(bf)).n
+    if bf.bench.n_cylinders != n_model:
+        field = "chain" if bf.bench.chain else "cylinder_positions"
+        raise bf.doc.error(
+            ("cylinder_positions",) if field == "cylinder_positions" else ("chain",),
+            f"{bf.bench.n_cylinders} cylinder positions, but the simulated chain has "
+            f"{n_model} cylinders: give cylinder_positions one per cylinder of the chain",
+        )
 
 
 def _check_transit(pf: ProtocolFile, bf: BenchFile, cylinders: NDArray[np.int32]) -> None:
