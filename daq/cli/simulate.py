@@ -236,6 +236,7 @@ def run(args: argparse.Namespace) -> int:
         drive_units=drive.units,
     )
     try:
+        args.out.parent.mkdir(parents=True, exist_ok=True)  # as run_protocol makes its folder
         writer = RunFileWriter.create(
             args.out, backend="dem", chain=model_chain_info(chain, bands), scans=[scan],
             simulation=simulation,

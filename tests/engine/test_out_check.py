@@ -80,3 +80,17 @@ def test_a_command_is_refused_before_its_work_where_it_cannot_write(
     assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr[-2000:]
     assert lines[-1].endswith("cannot write in . (permission denied)"), lines
     assert sorted(p.name for p in folder.iterdir()) == ["run.h5"]  # nothing written there
+
+
+def test_simulate_makes_the_folder_its_file_goes_into(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The check accepts a folder that does not exist yet; ``biafc simulate`` then ran its model
+    and failed in HDF5's own words (errno = 2, o_flags = 242). It makes the folder, as
+    ``run_protocol`` does."""
+    from daq.cli.biafc import main
+
+    out = tmp_path / "new" / "deeper" / "s.h5"
+    args = ["simulate", "--direction", "ltr", "--amplitude", "1um", "--duration", "5ms"]
+    assert main([*args, "--rate", "200kS/s", "--out", str(out)]) == 0, capsys.readouterr().err
+    assert out.exists()
