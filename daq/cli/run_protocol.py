@@ -170,13 +170,30 @@ def run(args: argparse.Namespace) -> int:
         from daq.engine.eta import homing_note
 
         basis = plan.costs.basis if plan.costs is not None else "the plan"
+        points, estimated_s = f"{plan.n_points} points", plan.estimated_s
+        if req.resume:  # what the resume measures, not the whole plan
+            todo = _points_left_in(out, plan)
+            points = f"{len(todo)} of {plan.n_points} points to measure"
+            estimated_s = plan.eta(todo).total_s()
         print(
-            f"protocol {pf.protocol.name!r} on {bf.bench.name!r}: {plan.n_points} points, "
-            f"estimated {_fmt_s(plan.estimated_s)} ({plan.estimated_s:.1f} s, from {basis}); "
+            f"protocol {pf.protocol.name!r} on {bf.bench.name!r}: {points}, "
+            f"estimated {_fmt_s(estimated_s)} ({estimated_s:.1f} s, from {basis}); "
             f"output {out}{homing_note(bf)}"
         )
         return 0
     return _execute(pf, bf, out, req.resume, req.seed, args.quiet, req.accept_bench_change)
+
+
+def _points_left_in(out: Path, plan: Any) -> tuple[Any, ...]:
+    """The points of ``plan`` the run file ``out`` does not hold as measured (read only)."""
+    import numpy as np
+
+    from daq.engine.plan import points_left
+    from protocols.runfile import open_for_reading
+
+    with open_for_reading(out) as f:
+        done = {d: np.asarray(f["scan"][d]["done"][...]) for d in plan.directions}
+    return points_left(plan, done)
 
 
 class _Interrupted(KeyboardInterrupt):

@@ -36,7 +36,7 @@ from daq.engine.decoder_delay import tail_samples, undo_decoder_delay
 from daq.engine.events import EventBus, EventKind, RunEvent, RunState, Subscriber
 from daq.engine.instruments import BenchInstruments
 from daq.engine.keep_awake import cannot_line, keep_awake
-from daq.engine.plan import Plan, Point, make_plan
+from daq.engine.plan import Plan, Point, make_plan, points_left
 from daq.store import create_run, resume_run
 from daq.store.disk_space import DiskFull, room_for_a_point
 from instruments.errors import InstrumentError, InstrumentTimeout, SignalLostError
@@ -633,12 +633,7 @@ class RunEngine:
             self._log("warning", f"{self.out_path.name}: {self._file_lock.stale_note}")
         if self._awake_note is not None:
             self._log(*self._awake_note)
-        done = {d: writer.done_mask(d) for d in self.plan.directions}
-        todo = [
-            p
-            for p in self.plan.points
-            if done[p.direction][p.amplitude_index, p.cylinder_index] != PointState.DONE
-        ]
+        todo = list(points_left(self.plan, {d: writer.done_mask(d) for d in self.plan.directions}))
         total = self.plan.n_points
         n_done = total - len(todo)
         self._n_already = n_done

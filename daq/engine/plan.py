@@ -70,6 +70,18 @@ class Plan:
         return len(self.points)
 
 
+def points_left(plan: Plan, done: dict[str, NDArray[np.uint8]]) -> tuple[Point, ...]:
+    """The points of ``plan`` a run file's ``done`` masks (direction -> ``[A, C]``) do not
+    hold as measured: what a resume measures, in the plan's order."""
+    from protocols.runfile import PointState
+
+    return tuple(
+        p
+        for p in plan.points
+        if done[p.direction][p.amplitude_index, p.cylinder_index] != PointState.DONE
+    )
+
+
 def make_plan(pf: ProtocolFile, bf: BenchFile) -> Plan:
     """Check the protocol against the bench and order its points. Raises :class:`ConfigError`."""
     proto, bench = pf.protocol, bf.bench

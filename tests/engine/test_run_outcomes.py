@@ -109,6 +109,9 @@ def test_failed_points_are_exit_4_and_a_resume_remeasures_them(
     last = _last_err(capsys)
     assert "1 of 12 points failed" in last and "--resume" in last
     assert read_run(part).status == "failed"
+    # the dry run of the resume says what it will measure, not the whole plan (12 points)
+    assert rp.main([str(proto_file), "--resume", str(part), "--dry-run"]) == 0
+    assert ": 1 of 12 points to measure, estimated" in capsys.readouterr().out
     assert rp.main([str(proto_file), "--resume", str(part), "--quiet"]) == 0
     out = capsys.readouterr().out
     assert "measured now 1, already in the file 11, failed 0" in out
