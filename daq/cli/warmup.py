@@ -28,7 +28,7 @@ def run(args: argparse.Namespace) -> int:
 
     from instruments.burst import Burst
     from sim_backend import dem
-    from sim_backend.dem.kernel_cache import kernel_cache_dir
+    from sim_backend.dem.kernel_cache import cache_note
 
     t_import = time.perf_counter() - t0
     t1 = time.perf_counter()
@@ -49,6 +49,6 @@ def run(args: argparse.Namespace) -> int:
     t_stab = time.perf_counter() - t1
     print(
         f"warm: DEM kernel ready in {t_kernel:.1f} s (imports {t_import:.1f} s, default chain "
-        f"{t_chain * 1e3:.0f} ms, stability verdicts {t_stab:.1f} s); cache {kernel_cache_dir()}"
+        f"{t_chain * 1e3:.0f} ms, stability verdicts {t_stab:.1f} s); {cache_note()}"
     )
     return 0

@@ -38,9 +38,11 @@ from instruments.beside import beside
 __all__ = [
     "CompileReporter",
     "announce_if_cold",
+    "cache_note",
     "compile_notice",
     "install_cache_locator",
     "kernel_cache_dir",
+    "kernel_cache_in_use",
     "kernel_cached_on_disk",
     "kernel_loaded",
     "remove_stale_compiled",
@@ -66,6 +68,30 @@ def kernel_cache_dir() -> Path:
     from instruments.user_cache import cache_dir
 
     return cache_dir() / "numba"
+
+
+def kernel_cache_in_use() -> Path:
+    """The folder numba really keeps the kernel in (imports the kernel, compiles nothing): under
+    :func:`kernel_cache_dir`, or ``$NUMBA_CACHE_DIR``, or, where the cache folder cannot be
+    written, numba's own choice beside the sources."""
+    from sim_backend.dem.kernel import run_chunks
+
+    path = getattr(getattr(run_chunks, "_cache", None), "_cache_path", None)
+    return Path(path) if path else kernel_cache_dir()
+
+
+def cache_note() -> str:
+    """Where the kernel is cached, for a person: the folder, and why when it is not the user's
+    cache folder (``biafc warmup`` said the cache folder while numba wrote beside the sources)."""
+    in_use, wanted = kernel_cache_in_use(), kernel_cache_dir()
+    if in_use == wanted or wanted in in_use.parents:
+        return f"cache {wanted}"
+    if os.environ.get("NUMBA_CACHE_DIR"):
+        return f"cache {in_use} ($NUMBA_CACHE_DIR)"
+    return (
+        f"cache {in_use}: the cache folder {wanted} cannot be written, so numba keeps it beside "
+        "the sources (set $BIAFC_CACHE_DIR to a folder you can write)"
+    )
 
 
 def _ours(py_file: str) -> bool:
@@ -169,7 +195,7 @@ def compile_notice(delay_s: float = 1.0, tick_s: float = 1.0) -> Iterator[None]:
         yield
         return
     cold = not kernel_cached_on_disk()
-    folder = kernel_cache_dir()
+    folder = kernel_cache_in_use()
     t0 = time.monotonic()
     started = threading.Event()
 

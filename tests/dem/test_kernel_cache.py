@@ -83,6 +83,14 @@ def test_unwritable_cache_folder_falls_back_without_failing(tmp_path: Path) -> N
     blocker.write_text("not a folder")
     path = _cache_path(str(blocker / "cache"))  # cannot be created: numba's own choice
     assert not path.is_relative_to(blocker.resolve())
+    # and what biafc warmup says is where it is: it named the folder it could not write
+    env = {k: v for k, v in os.environ.items() if not k.startswith("NUMBA_CACHE")}
+    env["BIAFC_CACHE_DIR"] = str(blocker / "cache")
+    probe = "from sim_backend.dem.kernel_cache import cache_note; print(cache_note())"
+    out = subprocess.run([sys.executable, "-c", probe], env=env, cwd=ROOT, capture_output=True,
+                         text=True, check=True, timeout=120).stdout.strip()  # fmt: skip
+    assert out.startswith(f"cache {path}: the cache folder {blocker / 'cache' / 'numba'} cannot")
+    assert "set $BIAFC_CACHE_DIR to a folder you can write" in out
 
 
 def test_compile_notice_reports_start_progress_and_end(monkeypatch: pytest.MonkeyPatch) -> None:
