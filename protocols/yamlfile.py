@@ -160,6 +160,14 @@ class _BoundedComposer(Composer, _Parser, Resolver):  # type: ignore[misc, valid
         return node
 
 
+class _Duplicate(ConfigError):
+    """A key given twice in one mapping, at the line of the second."""
+
+    def __init__(self, line: int, message: str) -> None:
+        super().__init__(message)
+        self.line = line
+
+
 def _build(
     node: yaml.Node, path: Path_, lines: dict[Path_, int], constructor: SafeConstructor
 ) -> Any:
@@ -174,7 +182,12 @@ def _build(
                 raise _Refused(where, "a key must be a name, not a list or a mapping")
             key = constructor.construct_object(key_node, deep=True)
             if key in out:
-                raise ConfigError(f"duplicate key {key!r}")
+                at = ".".join(str(k) for k in path)
+                raise _Duplicate(
+                    where,
+                    f"duplicate key {key!r}" + (f" in {at}" if at else "")
+                    + f" (first given on line {lines[(*path, key)]})",
+                )  # fmt: skip
             lines[(*path, key)] = where
             out[key] = _build(value_node, (*path, key), lines, constructor)
             lines[(*path, key)] = where  # the key's line, not the value's
@@ -219,6 +232,8 @@ def parse_yaml(text: str, source: str = "<string>") -> YamlDoc:
         data = _build(node, (), lines, SafeConstructor())
     except _Refused as exc:
         raise InputBoundError(f"{source}:{exc.line}: {exc}") from None
+    except _Duplicate as exc:  # at the second key's own line, not the document's first
+        raise ConfigError(f"{source}:{exc.line}: {exc}") from None
     except ConfigError as exc:
         raise ConfigError(f"{source}:{node.start_mark.line + 1}: {exc}") from None
     except yaml.MarkedYAMLError as exc:

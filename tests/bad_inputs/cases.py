@@ -227,6 +227,12 @@ CASES: tuple[Case, ...] = (
          {"run.h5": source("run_file"), "afile": "x"}),
     Case("regime_out_a_file", "biafc regime --out a file", ("biafc", "regime", "--out",
          "afile"), ("--out: afile is a file",), {"afile": "x"}),
+    _p("duplicate_key", "a key given twice (averages on lines 8 and 9)", "averages: 2",
+       "averages: 2\naverages: 3",
+       ("proto.yaml:9: duplicate key 'averages' (first given on line 8)",)),
+    _p("duplicate_nested_key", "a key given twice inside burst.ltr", "shape: narrowband",
+       "shape: narrowband, f_center: 9 kHz",
+       ("proto.yaml:5: duplicate key 'f_center' in burst.ltr (first given on line 5)",)),
     # -- protocol fields (the validation layer) ---------------------------------------------
     _p("cylinders_empty", "cylinders: []", "cylinders: [1, 8, 16]", "cylinders: []",
        ("proto.yaml", "cylinders")),
