@@ -129,8 +129,14 @@ def _sensitivity(run: RunData, bench: Any) -> float | None:
 
 def run_setup(run: RunData, piezo_stroke_m_per_V: float | None = None) -> RunSetup:
     """What the run did (see the module docstring); ``piezo_stroke_m_per_V`` replaces the
-    bench's stroke (ignored for files that hold the drive itself)."""
+    bench's stroke (a ValueError for a file without a bench: it holds the drive itself, and a
+    stroke given for it was silently ignored)."""
     bench = _bench(run)
+    if bench is None and piezo_stroke_m_per_V is not None:
+        raise ValueError(
+            "no bench in the file (it holds the drive itself, as biafc simulate writes it): a "
+            "piezo stroke does not apply; drop --piezo-stroke"
+        )
     gain = stroke = used = None
     kind: Literal["displacement", "force"] = "displacement"
     if bench is not None:

@@ -211,3 +211,19 @@ def test_the_prediction_reaches_the_records_last_sample() -> None:
     assert lr.velocity is not None and lr.time_s.size == t.size
     v = _on_time_axis(lr.time_s, lr.velocity[0, 0], t)
     assert v[-1] != 0.0 and abs(v[-1]) > 1e-3 * np.abs(v).max()
+
+
+def test_a_piezo_stroke_for_a_file_without_a_bench_is_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A biafc simulate file holds the drive itself: --piezo-stroke was silently ignored (exit
+    0, a residual of 0.000 that never used it)."""
+    sim = tmp_path / "sim.h5"
+    args = ["simulate", "--direction", "ltr", "--amplitude", "1um", "--duration", "5ms"]
+    assert biafc([*args, "--rate", "200kS/s", "--out", str(sim)]) == 0
+    capsys.readouterr()
+    out = tmp_path / "cmp"
+    assert biafc(["compare", str(sim), "--piezo-stroke", "0.04um/V", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "no bench in the file" in err and "drop --piezo-stroke" in err
+    assert len(err.splitlines()) == 1 and not out.exists()
