@@ -10,7 +10,8 @@ cylinder and its output peak has moved from the input:
 - frequency: ``|detuning| >= DETUNING_MIN_FRACTION * f_in``;
 
 then ``"down"`` (output below input) or ``"up"``; otherwise ``"none"``. Points where the far or
-the entry cylinder was not measured get ``"not measured"``.
+the entry cylinder was not measured get ``"not measured"``, and ``"failed: entry point"`` (or
+far) where that point was measured and failed.
 
 Why a gain and not a level: a short burst is broad, and in the linear regime its tail near the
 frequency where the end cylinders' bands nearly meet leaks through (about 1e-3 of the energy
@@ -29,7 +30,7 @@ import numpy as np
 
 from analysis.display import amplitude_label
 from analysis.sweep import AmplitudeSweep, amplitude_sweep, output_peak_definition
-from protocols.runfile import PointState, RunData
+from protocols.runfile import PointState, RunData, ScanData
 
 __all__ = [
     "DETUNING_MIN_FRACTION",
@@ -69,10 +70,34 @@ def _num(x: float) -> float | None:
     return float(x) if math.isfinite(x) else None
 
 
-def summary_rows(sweep: AmplitudeSweep) -> list[dict[str, Any]]:
-    """One row per amplitude of a sweep (JSON-ready: NaN becomes None)."""
+def _failed_ends(sweep: AmplitudeSweep, scan: ScanData | None, a: int) -> str | None:
+    """Which of the sweep's entry and far points failed at amplitude ``a`` ("entry", "far",
+    "entry and far"), or None; None without the scan."""
+    if scan is None:
+        return None
+    hit = []
+    for name, number in (("entry", sweep.entry), ("far", sweep.far)):
+        c = np.nonzero(scan.cylinders == number)[0]
+        if c.size and scan.done[a, int(c[0])] == PointState.FAILED:
+            hit.append(name)
+    return " and ".join(hit) or None
+
+
+def summary_rows(sweep: AmplitudeSweep, scan: ScanData | None = None) -> list[dict[str, Any]]:
+    """One row per amplitude of a sweep (JSON-ready: NaN becomes None); with the ``scan`` the
+    sweep was made of, a conversion that cannot be judged because the entry or far point
+    failed says so ("failed: far point"), not "not measured"."""
     rows = []
     for a, amp in enumerate(sweep.amplitudes):
+        verdict = conversion_verdict(
+            float(sweep.detuning_Hz[a]),
+            float(sweep.input_Hz[a]),
+            float(sweep.transmission[a]),
+            float(sweep.transmission_gain[a]),
+        )
+        failed = _failed_ends(sweep, scan, a) if verdict == "not measured" else None
+        if failed is not None:
+            verdict = f"failed: {failed} point"
         rows.append(
             {
                 "direction": sweep.direction,
@@ -84,12 +109,7 @@ def summary_rows(sweep: AmplitudeSweep) -> list[dict[str, Any]]:
                 "transmission": _num(sweep.transmission[a]),
                 "transmission_gain": _num(sweep.transmission_gain[a]),
                 "expected_output_Hz": _num(sweep.expected_Hz),
-                "conversion": conversion_verdict(
-                    float(sweep.detuning_Hz[a]),
-                    float(sweep.input_Hz[a]),
-                    float(sweep.transmission[a]),
-                    float(sweep.transmission_gain[a]),
-                ),
+                "conversion": verdict,
             }
         )
     return rows
@@ -109,7 +129,7 @@ def summarize(run: RunData) -> dict[str, Any]:
         sweep = amplitude_sweep(scan, run.chain)
         far[direction] = sweep.far
         peak[direction] = output_peak_definition(sweep)
-        rows.extend(summary_rows(sweep))
+        rows.extend(summary_rows(sweep, scan))
         points[direction] = {
             "measured": int(np.count_nonzero(scan.done == PointState.DONE)),
             "failed": int(np.count_nonzero(scan.done == PointState.FAILED)),
@@ -137,7 +157,7 @@ def format_summary(summary: dict[str, Any]) -> str:
         f"{summary['file']}  status={summary['status']}  backend={summary['backend']}",
         *(
             f"points {d}: {c['measured']} measured, {c['failed']} failed, {c['pending']} not "
-            "measured (the figures hatch the last two)"
+            "measured (the maps hatch failed and unmeasured points, the sweeps mark them x)"
             for d, c in counts.items()
             if c["failed"] or c["pending"]
         ),

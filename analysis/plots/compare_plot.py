@@ -15,6 +15,7 @@ from analysis.plots.style import (
     amplitude_label,
     amplitude_scale,
     cell_edges,
+    mark_missing,
     masked_cmap,
     new_figure,
     on_every_cylinder,
@@ -219,6 +220,20 @@ def plot_compare_residuals(cmp: Comparison) -> Figure:
         if np.any(np.isfinite(cmp.noise_residual)):
             ax.plot(x, cmp.noise_residual, "k_", ms=10, mew=2, label="noise floor")
         ax.axhline(1.0, color="k", ls=":", lw=1, label="predicting nothing")
+        # points not compared, marked at their cylinder (they were counted, not shown)
+        last = int(x.max()) if x.size else 1
+        for name, (marker, colour) in BAD_MARK.items():
+            hit = sorted(
+                {
+                    int(c)
+                    for dc in cmp.directions.values()
+                    for c, col in zip(dc.cylinders, (dc.state == name).T, strict=True)
+                    if col.any()
+                }
+            )
+            last = max([last, *hit])
+            mark_missing(ax, hit, colour, marker=marker, label=f"has {name} points (not compared)")
+        ax.set_xlim(0.5, last + 0.5)
         ax.set_xlabel("cylinder number")
         ax.set_ylabel("relative residual (RMS)")
         fom = cmp.figure_of_merit

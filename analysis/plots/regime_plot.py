@@ -17,7 +17,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from analysis.plots.quasi_bands import DIRECTION_COLOURS
-from analysis.plots.style import amplitude_scale, new_figure, style
+from analysis.plots.style import amplitude_scale, mark_missing, new_figure, style
 from analysis.sweep import AmplitudeSweep
 
 __all__ = ["plot_regime", "rms_ratio"]
@@ -43,6 +43,9 @@ def plot_regime(sweeps: Mapping[str, AmplitudeSweep]) -> Figure:
             amps = sw.amplitudes / factor
             r = rms_ratio(sw)
             ok = np.isfinite(r) & (amps > 0)
+            missing = f"{d.upper()} failed or not measured"
+            at = 0.03 if d == "ltr" else 0.09  # both directions' crosses visible
+            mark_missing(ax_t, amps[~ok & (amps > 0)], colour, label=missing, at=at)
             if not ok.any():
                 continue
             floor = float(r[ok][np.argmin(amps[ok])])
@@ -52,6 +55,7 @@ def plot_regime(sweeps: Mapping[str, AmplitudeSweep]) -> Figure:
             ax_t.axhline(floor, color=colour, ls="--", lw=1,
                          label=f"{d.upper()} linear floor {floor:.2g}")  # fmt: skip
             fo = np.isfinite(sw.output_Hz) & (amps > 0)
+            mark_missing(ax_f, amps[~fo & (amps > 0)], colour, label=missing, at=at)
             ax_f.plot(amps[fo], sw.output_Hz[fo] / 1e3, MARKERS.get(d, "o-"), color=colour,
                       label=f"{d.upper()} far-end peak")  # fmt: skip
             f_in = float(np.nanmedian(sw.input_Hz))

@@ -159,6 +159,36 @@ def gap_legend_handle() -> Patch:
     return Patch(facecolor="0.88", edgecolor="0.6", hatch="//", label=GAP_LABEL)
 
 
+def mark_missing(
+    ax: Axes,
+    positions: Sequence[float] | NDArray[Any],
+    colour: str,
+    *,
+    along: str = "x",
+    label: str | None = GAP_LABEL,
+    marker: str = "x",
+    at: float = 0.03,
+) -> None:
+    """Crosses for values a figure cannot draw (a failed or unmeasured point): at ``positions``
+    along the x axis, at the bottom edge of the axes (``along="x"``), or along the y axis, at
+    the left edge (``"y"``), ``at`` that fraction of the axes in; so a failed amplitude shows
+    as a cross, not as a silent gap."""
+    from matplotlib.transforms import blended_transform_factory
+
+    pos = np.asarray(positions, dtype=np.float64)
+    if pos.size == 0:
+        return
+    edge = np.full(pos.size, at)
+    if along == "x":
+        tr = blended_transform_factory(ax.transData, ax.transAxes)
+        xs, ys = pos, edge
+    else:
+        tr = blended_transform_factory(ax.transAxes, ax.transData)
+        xs, ys = edge, pos
+    ax.plot(xs, ys, marker, color=colour, ms=8, mew=2, ls="none", transform=tr,
+            clip_on=False, zorder=6, label=label)  # fmt: skip
+
+
 def on_every_cylinder(
     cylinders: Sequence[int] | NDArray[Any], rows: NDArray[Any]
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:

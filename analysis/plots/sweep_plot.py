@@ -16,6 +16,7 @@ from analysis.plots.style import (
     amplitude_scale,
     cell_edges,
     gap_legend_handle,
+    mark_missing,
     masked_cmap,
     new_figure,
     style,
@@ -119,16 +120,21 @@ def plot_amplitude_sweep(sweeps: Mapping[str, AmplitudeSweep]) -> Figure:
                     sw.transmission_gain[ok],
                     strict=True,
                 ):
-                    if np.isfinite(g):
-                        ax.annotate(
-                            f"×{g:.3g}",
-                            (x, y),
-                            textcoords="offset points",
-                            xytext=(0, 6),
-                            ha="center",
-                            fontsize=8,
-                            color=colour,
-                        )
+                    # a gain that cannot be read (the entry point failed) says so
+                    ax.annotate(
+                        f"×{g:.3g}" if np.isfinite(g) else "× n/a",
+                        (x, y),
+                        textcoords="offset points",
+                        xytext=(0, 6),
+                        ha="center",
+                        fontsize=8,
+                        color=colour,
+                    )
+                mark_missing(
+                    ax, sw.amplitudes[~ok] / f, colour, along="y",
+                    label=f"{d.upper()} far cylinder failed or not measured",
+                    at=0.03 if d == "ltr" else 0.09,
+                )  # fmt: skip
                 f_in = float(np.nanmedian(sw.input_Hz))
                 ax.axvline((sw.expected_Hz - f_in) / 1e3, color=colour, ls=":", lw=1.5)
                 if _log_amplitudes(sw.amplitudes):

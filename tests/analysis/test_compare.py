@@ -227,3 +227,44 @@ def test_a_piezo_stroke_for_a_file_without_a_bench_is_refused(
     err = capsys.readouterr().err.strip()
     assert "no bench in the file" in err and "drop --piezo-stroke" in err
     assert len(err.splitlines()) == 1 and not out.exists()
+
+
+def test_points_a_figure_cannot_draw_are_crosses_not_gaps(scan: Path) -> None:
+    """A second reader's run with failed points: the residual figure did not mark them at all,
+    and the regime figure left a failed amplitude out without a mark."""
+    import dataclasses
+
+    import matplotlib.pyplot as plt
+
+    from analysis.plots.compare_plot import plot_compare_residuals
+    from analysis.plots.regime_plot import plot_regime
+    from analysis.sweep import amplitude_sweep
+
+    run = read_run(scan)
+    fig = plot_compare_residuals(compare_run(run, None).comparison)
+    marks = [ln for ln in fig.axes[0].lines if ln.get_label().startswith("has failed points")]
+    assert len(marks) == 1 and list(marks[0].get_xdata()) == [16]  # ltr, 2 um, cylinder 16
+    plt.close(fig)
+    sw = amplitude_sweep(run.scans["ltr"], run.chain)
+    lost = sw.transmission.copy()
+    lost[1] = np.nan  # the entry or the far point of 2 um failed
+    fig = plot_regime({"ltr": dataclasses.replace(sw, transmission=lost)})
+    crosses = [ln for ln in fig.axes[0].lines if ln.get_label() == "LTR failed or not measured"]
+    assert len(crosses) == 1 and np.allclose(crosses[0].get_xdata(), [2.0])  # um
+    plt.close(fig)
+
+
+def test_a_conversion_whose_entry_point_failed_says_failed_not_unmeasured(scan: Path) -> None:
+    import dataclasses
+
+    from analysis.summary import summary_rows
+    from analysis.sweep import amplitude_sweep
+
+    run = read_run(scan)
+    s = run.scans["ltr"]
+    done, velocity = s.done.copy(), s.velocity.copy()
+    done[1, 0], velocity[1, 0] = PointState.FAILED, np.nan  # 2 um at cylinder 1, the entry
+    failed = dataclasses.replace(s, done=done, velocity=velocity)
+    rows = summary_rows(amplitude_sweep(failed, run.chain), failed)
+    assert rows[1]["conversion"] == "failed: entry point"  # it read "not measured"
+    assert rows[0]["conversion"] != "failed: entry point"
