@@ -131,6 +131,7 @@ def _write(report: CompareReport, run: RunData, out: Path) -> None:
         plot_compare_sweep,
     )
     from analysis.plots.style import amplitude_label, save_figure
+    from analysis.report import measured_amplitudes
 
     out.mkdir(parents=True, exist_ok=True)
     cmp, pred = report.comparison, report.predicted
@@ -139,7 +140,10 @@ def _write(report: CompareReport, run: RunData, out: Path) -> None:
         scan, pscan = run.scans[d], pred.scans[d]
         f_range = dc.measured_sweep.f_range_Hz
         rate = scan.sample_rate_Hz
-        amps = list(dict.fromkeys([0, len(scan.amplitudes) - 1]))
+        # the lowest and highest amplitudes measured, as biafc figures picks them (the
+        # protocol's largest, never measured in an aborted run, drew an all-hatched map)
+        measured = measured_amplitudes(scan) or [0, len(scan.amplitudes) - 1]
+        amps = list(dict.fromkeys([measured[0], measured[-1]]))
         for k, a in enumerate(amps):
             m = spatial_frequency_map(scan.velocity[a], scan.cylinders, rate, f_range)
             p = spatial_frequency_map(pscan.velocity[a], scan.cylinders, rate, f_range)

@@ -33,6 +33,8 @@ __all__ = [
 
 #: how each point state that is not compared is drawn
 BAD_MARK = {"failed": ("X", "red"), "clipped": ("^", "orange"), "pending": ("o", "grey")}
+#: what a legend calls each state (the other figures say "not measured", never "pending")
+SHOWN = {"failed": "failed", "clipped": "clipped", "pending": "not measured"}
 
 
 def plot_compare_spatial(
@@ -85,7 +87,7 @@ def plot_compare_spatial(
                         color=colour,
                         ms=7,
                         ls="none",
-                        label=st,
+                        label=SHOWN[st],
                     )
             ax.set_ylim(f_khz[0], f_khz[-1])
             ax.set_xlim(0.5, max(len(onset_Hz), int(smap.cylinders.max())) + 0.5)
@@ -165,11 +167,13 @@ def plot_compare_sweep(cmp: Comparison) -> Figure:
                 if np.any(sel):
                     yt = np.where(np.isfinite(ms.transmission[sel]), ms.transmission[sel], np.nan)
                     yt = np.where(np.isfinite(yt), yt, ps.transmission[sel])
-                    ax_t.plot(x[sel], yt, marker, color=mc, ms=8, ls="none", label=name)
+                    ax_t.plot(x[sel], yt, marker, color=mc, ms=8, ls="none", label=SHOWN[name])
                     yf = np.where(
                         np.isfinite(ms.output_Hz[sel]), ms.output_Hz[sel], ps.output_Hz[sel]
                     )
-                    ax_f.plot(x[sel], yf / 1e3, marker, color=mc, ms=8, ls="none", label=name)
+                    ax_f.plot(
+                        x[sel], yf / 1e3, marker, color=mc, ms=8, ls="none", label=SHOWN[name]
+                    )
             ax_f.axhline(ms.expected_Hz / 1e3, color=colour, ls=":", lw=1)
             ax_t.set_xlabel(f"amplitude ({unit})")
             ax_f.set_xlabel(f"amplitude ({unit})")
@@ -232,7 +236,8 @@ def plot_compare_residuals(cmp: Comparison) -> Figure:
                 }
             )
             last = max([last, *hit])
-            mark_missing(ax, hit, colour, marker=marker, label=f"has {name} points (not compared)")
+            shown = f"has {SHOWN[name]} points (not compared)"
+            mark_missing(ax, hit, colour, marker=marker, label=shown)
         ax.set_xlim(0.5, last + 0.5)
         ax.set_xlabel("cylinder number")
         ax.set_ylabel("relative residual (RMS)")

@@ -268,3 +268,31 @@ def test_a_conversion_whose_entry_point_failed_says_failed_not_unmeasured(scan: 
     rows = summary_rows(amplitude_sweep(failed, run.chain), failed)
     assert rows[1]["conversion"] == "failed: entry point"  # it read "not measured"
     assert rows[0]["conversion"] != "failed: entry point"
+
+
+def test_the_high_amplitude_map_is_the_highest_measured(
+    scan: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """In an aborted run the protocol's largest amplitude may never have been measured: its
+    'high' map was all hatched while a lower amplitude had its cylinders."""
+    import shutil
+
+    import h5py
+
+    import analysis.plots.compare_plot as cp
+
+    part = tmp_path / "part.h5"
+    shutil.copy(scan, part)
+    with h5py.File(part, "r+") as f:
+        for d in ("ltr", "rtl"):
+            f["scan"][d]["done"][1, :] = PointState.PENDING  # 2 um never measured
+    titles: list[str] = []
+    real = cp.plot_compare_spatial
+
+    def keep(*a, **k):  # type: ignore[no-untyped-def]
+        titles.append(a[-1])
+        return real(*a, **k)
+
+    monkeypatch.setattr(cp, "plot_compare_spatial", keep)
+    compare_run(read_run(part), tmp_path / "cmp")
+    assert titles and all("20 nm" in t for t in titles), titles
