@@ -378,14 +378,17 @@ class RunFileWriter:
         *,
         swmr: bool = True,
         extra_attrs: Mapping[str, Any] | None = None,
+        resumed: bool = True,
     ) -> RunFileWriter:
         """Re-open an interrupted run file to append points (``--resume``); ``extra_attrs``
-        are set on the root before SWMR starts."""
+        are set on the root before SWMR starts. ``resumed``: stamp the root's ``resumed``
+        time (not for a repair, which measures nothing)."""
         path = Path(path)
         _check_format(path)
         f = h5py.File(path, "r+", libver="latest")
         f.attrs["status"] = "running"
-        f.attrs["resumed"] = _now_iso()
+        if resumed:
+            f.attrs["resumed"] = _now_iso()
         for key, value in (extra_attrs or {}).items():
             f.attrs[key] = value
         f.flush()
@@ -474,10 +477,17 @@ class RunFileWriter:
         ds[n] = row[0]
         self._f.flush()
 
-    def close(self, status: Status, *, simulation: Mapping[str, Any] | None = None) -> None:
-        """Close, writing the final ``status`` (and ``finished`` time) as root attributes and
-        ``simulation`` (optional) as attributes of ``/simulation`` (created if absent; SWMR
-        forbids new attributes while writing, so they are set here)."""
+    def close(
+        self,
+        status: Status,
+        *,
+        simulation: Mapping[str, Any] | None = None,
+        stamp: str = "finished",
+    ) -> None:
+        """Close, writing the final ``status`` (and the time, as root attribute ``stamp``:
+        ``finished``, or ``repaired`` for a repair) as root attributes and ``simulation``
+        (optional) as attributes of ``/simulation`` (created if absent; SWMR forbids new
+        attributes while writing, so they are set here)."""
         if self._closed:
             return
         self._check_usable()
@@ -489,7 +499,7 @@ class RunFileWriter:
             self._closed = True
             with open_to_finish(self.path) as f:  # waits for readers following the run
                 f.attrs["status"] = status
-                f.attrs["finished"] = _now_iso()
+                f.attrs[stamp] = _now_iso()
                 if simulation:
                     sim = f.require_group("simulation")
                     for key, value in simulation.items():

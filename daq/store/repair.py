@@ -139,20 +139,21 @@ def repair_run(path: str | Path) -> RepairReport:
         status_after = data.status
         if data.status == "running":
             try:
-                writer = RunFileWriter.open_existing(path, swmr=False)
+                writer = RunFileWriter.open_existing(path, swmr=False, resumed=False)
             except (OSError, RuntimeError) as exc:
                 # killed while writing metadata outside SWMR (closing): the data reads, but
                 # the file takes no more writes; copy every object into a fresh file
                 _rebuild(path)
                 actions.append(f"rebuilt the file (it took no writes: {str(exc)[:60]})")
-                writer = RunFileWriter.open_existing(path, swmr=False)
+                writer = RunFileWriter.open_existing(path, swmr=False, resumed=False)
             n_done, n_failed, n_pending = before_counts
             writer.log(
                 "error",
-                f"repaired: the writer was killed; {n_done} point(s) kept, {n_failed} failed, "
-                f"{n_pending} pending (continue with --resume)",
+                "repaired: the writer did not close the file (it was killed, or its disk "
+                f"filled or its folder turned read-only); {n_done} point(s) kept, {n_failed} "
+                f"failed, {n_pending} pending (continue with --resume)",
             )
-            writer.close("aborted")
+            writer.close("aborted", stamp="repaired")
             status_after = "aborted"
             actions.append("marked the run aborted (it was still 'running')")
         for part in _leftovers(path):

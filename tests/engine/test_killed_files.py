@@ -70,6 +70,10 @@ def test_repair_makes_a_killed_file_readable_by_plain_h5py_without_losing_a_poin
         np.testing.assert_array_equal(done[d], after[d])
     run = read_run(killed)
     assert run.status == "aborted" and any("repaired" in m for _, _, m in run.log)
+    assert any("did not close the file (it was killed, or its disk" in m for _, _, m in run.log)
+    # a repair measures nothing: it stamps its own time, not 'resumed' or 'finished'
+    assert "repaired" in run.attrs and "resumed" not in run.attrs
+    assert "finished" not in run.attrs
     assert not lock_path(killed).exists()
     assert biafc(["repair", str(killed)]) == 0  # idempotent
     assert "nothing to repair" in capsys.readouterr().out
