@@ -108,8 +108,9 @@ class MainWindow(QMainWindow):
         self.adapter: EngineEventAdapter | None = None
         self.live = LiveData()
         self.last_result: Any = None
-        #: the process's exit status: a run aborted by closing the window gives its own (1, or 3
-        #: unsafe), as run_protocol would; 0 otherwise
+        #: the process's exit status, as run_protocol's: the last run's (0 complete, 1 failed
+        #: or aborted, 3 unsafe, 4 points failed; a run aborted by closing the window too);
+        #: closed by a stop signal while no run was active, 128 + the signal; 0 without a run
         self.exit_status = 0
         #: the stop signal that closes the window (:meth:`stop_signal`), or None
         self._stop_signal: int | None = None
@@ -123,6 +124,11 @@ class MainWindow(QMainWindow):
         self._safe_busy: Any = None
         self._close_after_safe = False
         self._pending_start: tuple[Path | None] | None = None
+        #: a resumed run's file whose points are being read before it starts (None: none)
+        self._prefilling: Path | None = None
+        #: what works on the instruments now, besides a run (a Safe state, a read of their
+        #: state): Start waits for them
+        self._busy: list[str] = []
         # the model (numba, the compiled kernel, the chain's tools) loads here, before the
         # window turns, not on the event loop or beside it when the first run starts
         import analysis.model_overlay  # noqa: F401
@@ -151,6 +157,20 @@ class MainWindow(QMainWindow):
             button.setEnabled(not active)
         bp.refresh_button.setEnabled(not active and self.instruments is not None)
         pp.editor.setReadOnly(active)
+
+    def _hold_instruments(self, what: str) -> None:
+        self._busy.append(what)
+        self.run_panel.set_blocked(True)
+        self.bench_panel.refresh_button.setEnabled(False)
+
+    def _release_instruments(self, what: str) -> None:
+        if what in self._busy:
+            self._busy.remove(what)
+        if not self._busy:
+            self.run_panel.set_blocked(False)
+            self.bench_panel.refresh_button.setEnabled(
+                self.instruments is not None and not self.running
+            )
 
     def _build(self) -> None:
         self.bench_panel = BenchPanel()
@@ -369,8 +389,11 @@ class MainWindow(QMainWindow):
             self.log("instrument state is refreshed after the run", "warning")
             return
         inst = self.instruments
+        what = "reading the instruments' state"
+        self._hold_instruments(what)
 
         def done(snap: Any, err: BaseException | None) -> None:
+            self._release_instruments(what)
             if inst is not self.instruments:
                 return
             if err is None:
@@ -400,6 +423,7 @@ class MainWindow(QMainWindow):
         channels = sorted(set(self.bench_file.bench.direction_channel.values()))
         self.bench_panel.safe_button.setEnabled(False)
         self._safe_busy, self._close_after_safe = inst, False
+        self._hold_instruments("the Safe state")
 
         def work() -> dict[str, Any]:
             from daq.engine.outcome import unsafe_instruction
@@ -416,6 +440,7 @@ class MainWindow(QMainWindow):
 
         def done(snap: Any, err: BaseException | None) -> None:
             self._safe_busy = None
+            self._release_instruments("the Safe state")
             if self._close_after_safe:  # disconnected meanwhile: closed now, after it
                 self._close_after_safe = False
                 BackgroundCall(inst.close, lambda r, e: None, name="biafc-gui-close")
@@ -428,6 +453,7 @@ class MainWindow(QMainWindow):
                 self.log("instruments in safe state (before the bench was disconnected)")
                 return
             self.log("instruments in safe state")
+            self._clear_unsafe_mark()  # confirmed now: the last run's UNSAFE no longer holds
             self.bench_panel.show_snapshot(snap)
 
         BackgroundCall(work, done, name="biafc-gui-safe")
@@ -517,6 +543,13 @@ class MainWindow(QMainWindow):
             self.log("dry run: the protocol is not valid (see the protocol panel)", "error")
             return
         out = self._output_path()
+        from daq.request import RequestError, validate_request
+
+        try:  # the output too, as run_protocol --dry-run checks it (a complete run, no folder)
+            validate_request(self.protocol_file, self.bench_file, out=out)
+        except RequestError as exc:
+            self.log(f"dry run: refused: {exc}", "error")
+            return
         self.log(
             f"dry run: {self.plan.n_points} points, estimated "
             f"{format_duration(self.plan.estimated_s)} ({self.plan.estimated_s:.1f} s); "
@@ -550,6 +583,10 @@ class MainWindow(QMainWindow):
             return False
         if not isinstance(resume_path, Path):
             resume_path = None  # a clicked() bool
+        if self._busy:  # the buttons are disabled meanwhile; a call from code is refused
+            self.log(f"cannot start yet: {self._busy[0]} is still working on the instruments",
+                     "warning")  # fmt: skip
+            return False
         self.protocol_panel.validate_now()
         if self.protocol_file is None or self.plan is None:
             self.log("cannot start: the protocol is not valid (see the protocol panel)", "error")
@@ -583,10 +620,14 @@ class MainWindow(QMainWindow):
                 return LiveData.from_run(read_run(path))
 
             def then(live: Any, err: BaseException | None) -> None:
+                if self._prefilling != path:  # aborted (or closed) while the file was read
+                    return
+                self._prefilling = None
                 if err is not None:
                     self.log(f"{shown_path(path)}: its points are not shown ({err})", "warning")
                 self.start_run(path, prefill=live if err is None else False)
 
+            self._prefilling = path
             self.run_panel.set_state("starting")
             BackgroundCall(read, then, name="biafc-gui-prefill")
             return True
@@ -613,6 +654,8 @@ class MainWindow(QMainWindow):
         self.run_panel.progress.setMaximum(engine.plan.n_points)
         self.run_panel.progress.setValue(self.live.n_points)  # a resumed run's points: done
         self.run_panel.set_state("running")
+        self.run_panel.where_label.setStyleSheet("")  # a refusal's red, before this run
+        self._clear_unsafe_mark()
         from daq.logsetup import attach_run_log, detach
 
         detach(getattr(self, "_run_log", None))
@@ -632,6 +675,14 @@ class MainWindow(QMainWindow):
     def abort(self, reason: str = "aborted by the user") -> None:
         if not isinstance(reason, str):
             reason = "aborted by the user"
+        if not self.running and (self._pending_start is not None or self._prefilling):
+            # still starting (the bench connecting, a resumed file being read): the start
+            # is cancelled, as run_protocol's Ctrl-C while it connects; it went ahead before
+            self._pending_start = self._prefilling = None
+            self.run_panel.set_state("idle")
+            self.run_panel.where_label.setText("start cancelled: nothing was switched on")
+            self.log(f"start cancelled ({reason}): nothing was switched on", "warning")
+            return
         if self.engine is not None and self.running:
             self.log(f"aborting: {reason}", "warning")
             self.engine.abort(reason)
@@ -725,6 +776,10 @@ class MainWindow(QMainWindow):
                 "✗ UNSAFE: the generator's outputs were not confirmed off; switch them off by "
                 "hand (the run's last line says which)"
             )
+        if self.last_result is not None:  # the process's status is the last run's, as
+            from daq.engine.outcome import exit_code  # run_protocol's (0 when it completed)
+
+            self.exit_status = int(exit_code(self.last_result))
         self._redraw()
         self.refresh_snapshot()
         from daq.logsetup import detach
@@ -732,6 +787,16 @@ class MainWindow(QMainWindow):
         detach(getattr(self, "_run_log", None))
         self._run_log = None
         self.run_finished.emit(status)
+
+    def _clear_unsafe_mark(self) -> None:
+        """Take down the bench panel's "UNSAFE" of an earlier run (once a Safe state has
+        confirmed every output off, or a new run starts): it stayed up until Reconnect."""
+        label = self.bench_panel.status_label
+        if label.text().startswith("✗ UNSAFE"):
+            label.setStyleSheet("")
+            name = self.bench_file.bench.name if self.bench_file is not None else "bench"
+            backend = getattr(self.instruments, "backend", "")
+            label.setText(f"{name}: connected ({backend})" if backend else name)
 
     def _redraw_if_dirty(self) -> None:
         interval = self._pace.tick()
@@ -854,6 +919,9 @@ class MainWindow(QMainWindow):
 
     def closeEvent(self, event: QCloseEvent) -> None:
         signum = self._stop_signal
+        self._pending_start = self._prefilling = None  # a start under way does not go ahead
+        if not self.running and signum is not None:  # idle: the signal's own status
+            self.exit_status = 128 + signum
         if self.running:
             if signum is None:
                 self._asking_close = True
@@ -892,8 +960,6 @@ class MainWindow(QMainWindow):
         self._finish_close(event)
 
     def _finish_close(self, event: QCloseEvent) -> None:
-        if self._stop_signal is not None and not self.exit_status:
-            self.exit_status = 128 + self._stop_signal  # no run left to give its status
         self._redraw_timer.stop()
         if self.instruments is not None:
             try:

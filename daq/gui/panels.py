@@ -236,11 +236,20 @@ class RunPanel(QGroupBox):
         self.resume_file_button.clicked.connect(self.resume_file_requested)
         self.set_state("idle")
 
+    def set_blocked(self, blocked: bool) -> None:
+        """Hold Start and Resume file back while another task works on the instruments (the
+        Safe state, a read of their state): a run started then drove the bench from a second
+        thread."""
+        self._blocked = blocked
+        self.set_state(self._state)
+
     def set_state(self, state: str) -> None:
         """Enable the buttons that make sense in engine state ``state``."""
+        self._state = state
         active = state in ("running", "paused", "starting")
-        self.start_button.setEnabled(not active)
-        self.resume_file_button.setEnabled(not active)
+        free = not active and not getattr(self, "_blocked", False)
+        self.start_button.setEnabled(free)
+        self.resume_file_button.setEnabled(free)
         self.pause_button.setEnabled(state == "running")
         self.resume_button.setEnabled(state == "paused")
         self.abort_button.setEnabled(active)

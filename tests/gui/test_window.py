@@ -117,7 +117,9 @@ def test_pause_resume_abort_buttons(qtbot: Any, tmp_path: Path) -> None:
     run = read_run(tmp_path / "a.h5")
     assert run.status == "aborted"
     assert 0 < _done_count(tmp_path / "a.h5") < 6
-    assert rp.start_button.isEnabled() and not rp.abort_button.isEnabled()
+    # Start waits for the read of the instruments' state that follows a run (it worked on them)
+    wait_until(qtbot, lambda: rp.start_button.isEnabled(), timeout_s=10)
+    assert not rp.abort_button.isEnabled()
     assert win.bench_panel.connect_button.isEnabled()
     assert not win.protocol_panel.editor.isReadOnly()
     if hasattr(win.instruments.world, "outputs"):  # fake bench: generator outputs off
@@ -468,3 +470,110 @@ def test_a_file_that_is_no_run_file_is_named_once(qtbot: Any, tmp_path: Path) ->
     assert cb.args == [False]
     line = win.log_view.lines[-1]
     assert line.count(str(bad)) == 1, line
+
+
+def test_start_waits_while_the_safe_state_works_on_the_instruments(
+    qtbot: Any, window: MainWindow
+) -> None:
+    """Start stayed enabled while the Safe state worked: the run homed and moved the stage and
+    fired bursts from a second thread while the Safe state's worker was still inside it (a
+    second reader's trace). Start and Resume file now wait for it."""
+    import threading
+
+    connect(qtbot, window)
+    inst = window.instruments
+    release, moves = threading.Event(), []
+    real_safe, real_move = inst.stage.safe_state, inst.stage.move_to
+
+    def slow_safe() -> None:
+        release.wait(10)
+        real_safe()
+
+    def move_to(*a: Any, **k: Any) -> Any:
+        moves.append(release.is_set())
+        return real_move(*a, **k)
+
+    inst.stage.safe_state = slow_safe
+    inst.stage.move_to = move_to
+    window.bench_panel.safe_button.click()
+    qtbot.wait(100)
+    rp = window.run_panel
+    assert not rp.start_button.isEnabled() and not rp.resume_file_button.isEnabled()
+    assert window.start_run() is False  # from code: refused, said
+    assert "cannot start yet: the Safe state is still working" in window.log_view.lines[-1]
+    assert window.engine is None and moves == []
+    release.set()
+    qtbot.waitUntil(lambda: rp.start_button.isEnabled(), timeout=5000)
+    with qtbot.waitSignal(window.run_finished, timeout=60_000):
+        rp.start_button.click()
+    assert moves and all(moves)  # every move after the Safe state ended
+
+
+def test_abort_while_the_bench_connects_cancels_the_start(qtbot: Any, tmp_path: Path) -> None:
+    """Abort while the run was 'starting' (the bench connecting) did nothing, and the run then
+    went ahead to its end (a second reader)."""
+    import threading
+
+    gate = threading.Event()
+    real = make_assembler()
+
+    def slow(bf: Any, seed: int | None) -> Any:
+        gate.wait(10)
+        return real(bf, seed)
+
+    win = MainWindow(None, SMOKE, assembler=slow)
+    qtbot.addWidget(win)
+    win.run_panel.out_edit.setText(str(tmp_path / "never.h5"))
+    win.show()
+    win.run_panel.start_button.click()
+    assert win.run_panel.abort_button.isEnabled()
+    win.run_panel.abort_button.click()
+    assert (
+        "start cancelled" in win.log_view.lines[-1]
+        and "nothing was switched on" in (win.log_view.lines[-1])
+    )
+    with qtbot.waitSignal(win.connected, timeout=60_000):
+        gate.set()
+    qtbot.wait(300)
+    assert win.engine is None and not (tmp_path / "never.h5").exists()
+    assert win.run_panel.start_button.isEnabled()
+
+
+def test_the_unsafe_mark_goes_once_the_safe_state_is_confirmed_and_the_status_is_kept(
+    qtbot: Any, tmp_path: Path
+) -> None:
+    """The bench panel's 'UNSAFE' of a run stayed up after a Safe state had confirmed every
+    output off (until Reconnect); and the window's process exited 0 after an unsafe run."""
+
+    def silent(bf: Any, seed: int | None) -> Any:
+        return connect_bench(
+            bf, seed=seed, faults={"generator_silent": True, "after_acquisitions": 3}
+        )
+
+    win = MainWindow(None, SMOKE, assembler=silent)
+    qtbot.addWidget(win)
+    win.show()
+    win.run_panel.out_edit.setText(str(tmp_path / "u.h5"))
+    connect(qtbot, win)
+    with qtbot.waitSignal(win.run_finished, timeout=60_000):
+        win.run_panel.start_button.click()
+    assert win.bench_panel.status_label.text().startswith("✗ UNSAFE")
+    assert win.exit_status == 3  # as run_protocol's
+    win.instruments.world.faults.clear()  # the generator answers again
+    qtbot.waitUntil(lambda: win.bench_panel.safe_button.isEnabled(), timeout=5000)
+    win.bench_panel.safe_button.click()
+    qtbot.waitUntil(lambda: "instruments in safe state" in win.log_view.lines[-1], timeout=10_000)
+    assert not win.bench_panel.status_label.text().startswith("✗ UNSAFE")
+
+
+def test_the_dry_run_checks_the_output_as_run_protocol_does(
+    qtbot: Any, window: MainWindow, tmp_path: Path
+) -> None:
+    done = tmp_path / "done.h5"
+    window.run_panel.out_edit.setText(str(done))
+    connect(qtbot, window)
+    with qtbot.waitSignal(window.run_finished, timeout=60_000):
+        window.run_panel.start_button.click()
+    window.dry_run()  # the same output again: a complete run, refused by the command line
+    assert "dry run: refused" in window.log_view.lines[-1]
+    assert "complete" in window.log_view.lines[-1]
