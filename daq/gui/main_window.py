@@ -306,13 +306,15 @@ class MainWindow(QMainWindow):
 
         BackgroundCall(lambda: chain_info(bf), done, name="biafc-gui-chain")
 
-    def _set_model_for_bench(self, bf: Any) -> None:
-        """The "model" overlay of a run about to start: the bench's chain, gain and stroke."""
+    def _set_model_for_bench(self, bf: Any, pf: Any = None) -> None:
+        """The "model" overlay of a run about to start: the bench's chain, gain and stroke, the
+        run's protocol ``pf`` (default: the editor's)."""
         from analysis.model_overlay import ModelOverlay
         from daq.chain_info import chain_spec
 
+        proto = (pf if pf is not None else self.protocol_file).protocol
         try:
-            overlay = ModelOverlay.for_bench(bf.bench, self.protocol_file.protocol, chain_spec(bf))
+            overlay = ModelOverlay.for_bench(bf.bench, proto, chain_spec(bf))
         except Exception as exc:
             self.log(f"model overlay unavailable: {exc}", "warning")
             overlay = None
@@ -510,10 +512,13 @@ class MainWindow(QMainWindow):
         if self.chain is not None:
             self.views.show_chain(self.chain, self._f_in())
 
-    def _f_in(self) -> float | None:
-        if self.protocol_file is None:
+    def _f_in(self, pf: Any = None) -> float | None:
+        """The input frequency (Hz) the bands view marks: of protocol ``pf`` (default: the
+        editor's), its first direction's."""
+        pf = pf if pf is not None else self.protocol_file
+        if pf is None:
             return None
-        burst = self.protocol_file.protocol.burst
+        burst = pf.protocol.burst
         for d in ("ltr", "rtl"):
             if d in burst:
                 return float(burst[d].f_center)
@@ -587,14 +592,17 @@ class MainWindow(QMainWindow):
             self.log(f"cannot start yet: {self._busy[0]} is still working on the instruments",
                      "warning")  # fmt: skip
             return False
-        self.protocol_panel.validate_now()
-        if self.protocol_file is None or self.plan is None:
-            self.log("cannot start: the protocol is not valid (see the protocol panel)", "error")
-            return False
         resume = resume_path is not None
+        if not resume:  # a resumed run is the file's protocol, whatever the editor holds
+            self.protocol_panel.validate_now()
+            if self.protocol_file is None or self.plan is None:
+                self.log(
+                    "cannot start: the protocol is not valid (see the protocol panel)", "error"
+                )
+                return False
         try:  # the whole request, output and resume file included, before connecting
             req = validate_request(
-                self.protocol_file,
+                None if resume else self.protocol_file,  # resume: the file's, as run_protocol
                 self.bench_file,
                 out=None if resume else self._output_path(),
                 resume=resume_path,
@@ -631,11 +639,9 @@ class MainWindow(QMainWindow):
             self.run_panel.set_state("starting")
             BackgroundCall(read, then, name="biafc-gui-prefill")
             return True
-        bf, out, seed = self.bench_file, req.out, req.seed
+        bf, out, seed, pf = self.bench_file, req.out, req.seed, req.protocol
         try:
-            engine = RunEngine(
-                self.protocol_file, bf, self.instruments, out, resume=resume, seed=seed
-            )
+            engine = RunEngine(pf, bf, self.instruments, out, resume=resume, seed=seed)
         except Exception as exc:
             self.log(f"cannot start: {exc}", "error")
             self.run_panel.set_state("idle")
@@ -643,9 +649,9 @@ class MainWindow(QMainWindow):
         if isinstance(prefill, LiveData):  # before, a resumed run's maps began empty
             self.live = prefill
         else:
-            self.live = LiveData.for_plan(engine.plan, self.protocol_file.protocol, self.chain)
-        self.views.show_chain(self.chain, self._f_in())
-        self._set_model_for_bench(bf)
+            self.live = LiveData.for_plan(engine.plan, pf.protocol, self.chain)
+        self.views.show_chain(self.chain, self._f_in(pf))
+        self._set_model_for_bench(bf, pf)
         adapter = EngineEventAdapter(self)
         adapter.events_ready.connect(self._on_events)
         engine.subscribe(adapter)

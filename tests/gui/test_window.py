@@ -577,3 +577,31 @@ def test_the_dry_run_checks_the_output_as_run_protocol_does(
     window.dry_run()  # the same output again: a complete run, refused by the command line
     assert "dry run: refused" in window.log_view.lines[-1]
     assert "complete" in window.log_view.lines[-1]
+
+
+def test_resume_file_continues_the_files_own_protocol(qtbot: Any, tmp_path: Path) -> None:
+    """Resume file… checked and ran the editor's protocol: a run of another protocol was
+    refused ('started with another protocol'), where run_protocol --resume, which takes the
+    protocol and bench from the file, completed it (a second reader)."""
+    from daq.cli import run_protocol as rp
+    from protocols.bench import default_bench_path
+
+    alt = tmp_path / "smoke_alt.yaml"
+    alt.write_text(SMOKE.read_text().replace("name: smoke", "name: smoke_alt"))
+    failing = tmp_path / "failing.yaml"
+    failing.write_text(
+        default_bench_path()
+        .read_text()
+        .replace("faults: {}", "faults: {stage_stall: true, after_acquisitions: 4}")
+    )
+    f = tmp_path / "alt.h5"
+    assert rp.main([str(alt), "--bench", str(failing), "--out", str(f), "-q"]) == 1
+    win = MainWindow(None, SMOKE, assembler=make_assembler())
+    qtbot.addWidget(win)
+    win.show()
+    connect(qtbot, win)
+    with qtbot.waitSignal(win.run_finished, timeout=60_000) as blocker:
+        assert win.start_run(f), win.log_view.lines[-2:]
+    assert blocker.args == ["complete"], win.log_view.lines[-3:]
+    assert read_run(f).status == "complete"
+    assert read_run(f).attrs["protocol_yaml"].startswith(alt.read_text()[:40])
