@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 
 from analysis.spectra import amplitude_spectrum, n_fft_for
 from instruments.burst import Burst, burst_waveform
-from protocols.runfile import ChainInfo, RunData
+from protocols.runfile import ChainInfo, PointState, RunData
 
 __all__ = ["F_MAX_FACTOR", "LiveData", "ScanView", "Trace"]
 
@@ -57,6 +57,12 @@ class ScanView:
     spectrum: NDArray[np.float64]
     at_input: NDArray[np.float64]
     n_filled: int = 0
+    #: ``[A, C]``: points that failed (every retry), drawn as such, not as "not measured yet"
+    failed: NDArray[np.bool_] = field(default_factory=lambda: np.zeros((0, 0), dtype=bool))
+
+    def __post_init__(self) -> None:
+        if self.failed.shape != self.at_input.shape:
+            self.failed = np.zeros(self.at_input.shape, dtype=bool)
 
     @classmethod
     def empty(
@@ -89,7 +95,12 @@ class ScanView:
         self.spectrum[ai, ci] = magnitude[: self.freq_Hz.size]
         k = int(np.argmin(np.abs(self.freq_Hz - self.f_center_Hz)))
         self.at_input[ai, ci] = magnitude[k]
+        self.failed[ai, ci] = False  # a resumed run measured it after all
         self.n_filled += 1
+
+    def mark_failed(self, ai: int, ci: int) -> None:
+        """Point (``ai``, ``ci``) failed: it keeps no spectrum, and is marked."""
+        self.failed[ai, ci] = True
 
 
 @dataclass
@@ -101,6 +112,9 @@ class LiveData:
     bursts: dict[str, Burst] = field(default_factory=dict)
     last: Trace | None = None
     n_points: int = 0
+    n_failed: int = 0
+    #: the last point that failed (direction, amplitude, units, cylinder, reason), or None
+    last_failed: tuple[str, float, str, int, str] | None = None
 
     @classmethod
     def for_plan(cls, plan: Any, protocol: Any, chain: ChainInfo | None) -> LiveData:
@@ -160,6 +174,21 @@ class LiveData:
         self.n_points += 1
         return self.last
 
+    def add_failed(self, data: dict[str, Any]) -> None:
+        """Take a ``point_failed`` event's data: the point is marked failed in its maps."""
+        d = str(data["direction"])
+        scan = self.scans.get(d)
+        if scan is not None:
+            scan.mark_failed(int(data["amplitude_index"]), int(data["cylinder_index"]))
+        self.n_failed += 1
+        self.last_failed = (
+            d,
+            float(data["amplitude"]),
+            str(data.get("amplitude_units", "")),
+            int(data["cylinder"]),
+            str(data.get("reason", "")),
+        )
+
     @classmethod
     def from_run(cls, run: RunData) -> LiveData:
         """Every measured point of a run file (for browsing a finished or interrupted run)."""
@@ -175,6 +204,8 @@ class LiveData:
                 d, s.f_center_Hz, s.amplitudes, s.amplitude_units, s.cylinders, s.time_s.size, rate
             )
             out.scans[d] = view
+            view.failed = np.asarray(s.done == PointState.FAILED)
+            out.n_failed += int(np.count_nonzero(view.failed))
             done = s.is_done()
             for ai, ci in zip(*np.nonzero(done), strict=True):
                 v = np.asarray(s.velocity[ai, ci], np.float64)

@@ -730,6 +730,12 @@ class MainWindow(QMainWindow):
                 except Exception as exc:
                     self.log(f"live view: {exc}", "warning")
                 self._dirty = True
+            elif k == EventKind.POINT_FAILED:  # marked in the maps, not left as "not yet"
+                try:
+                    self.live.add_failed({**d, "reason": ev.message})
+                except Exception as exc:
+                    self.log(f"live view: {exc}", "warning")
+                self._dirty = True
             elif k == EventKind.PROGRESS:
                 self.run_panel.show_progress(d)
             # the engine records its own events in the run's log and file: shown here only
@@ -852,7 +858,10 @@ class MainWindow(QMainWindow):
             f_in = next(iter(live.scans.values())).f_center_Hz if live.scans else None
             self.views.show_chain(live.chain, f_in)
             self._redraw()
-            self.log(f"opened {p.name}: status {run.status}, {live.n_points} points measured")
+            failed = f", {live.n_failed} failed" if live.n_failed else ""
+            self.log(
+                f"opened {p.name}: status {run.status}, {live.n_points} points measured{failed}"
+            )
             self.setWindowTitle(f"biafc-lab — {p.name}")
             if on_done:
                 on_done(True)

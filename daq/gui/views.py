@@ -31,6 +31,8 @@ _CMAP = pg.colormap.get("viridis")
 _BAND_BRUSH = (255, 160, 0, 60)
 _INPUT_PEN = pg.mkPen((220, 0, 0), width=2, style=pg.QtCore.Qt.PenStyle.DashLine)
 _EDGE_PEN = pg.mkPen((255, 140, 0), width=2)
+#: failed points on the maps (a cross: the input line is red too, but a line)
+_FAILED_RGB = (255, 60, 60)
 _MODEL_PEN = pg.mkPen((0, 0, 0), width=1.5, style=pg.QtCore.Qt.PenStyle.DashLine)
 
 
@@ -160,7 +162,13 @@ class SpatialMapView(pg.PlotWidget):
         self.model_peaks.setZValue(10)
         self.addItem(self.model_peaks)
         self.model_peaks.hide()
+        self.failed_marks = pg.ScatterPlotItem(
+            symbol="x", size=14, pen=pg.mkPen(_FAILED_RGB, width=3), brush=None
+        )
+        self.failed_marks.setZValue(11)
+        self.addItem(self.failed_marks)
         self.n_rows = 0
+        self.n_failed = 0
 
     def show_model_peaks(self, peak_Hz: NDArray[np.float64] | None) -> None:
         """The model's peak frequency of every cylinder (white crosses), or hide (``None``)."""
@@ -178,11 +186,16 @@ class SpatialMapView(pg.PlotWidget):
             img = np.log10(mag)
         finite = np.isfinite(img)
         self.n_rows = int(np.count_nonzero(finite.any(axis=1)))
+        failed = scan.failed[ai]
+        self.n_failed = int(np.count_nonzero(failed))
         if not finite.any() or scan.freq_Hz.size < 2:
             self.image.clear()
+            self.failed_marks.setData([], [])
             return
         lo, hi = np.percentile(img[finite], [5, 100])
-        img = np.where(finite, img, lo - 1)
+        # not measured (or failed): NaN, drawn transparent, outside the colour scale; it was
+        # set below the scale and clipped to its lowest colour, as a quiet measured cell
+        img = np.where(finite, img, np.nan)
         # one row per cylinder number 1..n: a measured cylinder fills the rows nearest to it
         # (sparse protocols), so the rows line up with the band edges drawn per cylinder
         cyl = np.sort(scan.cylinders)
@@ -207,9 +220,15 @@ class SpatialMapView(pg.PlotWidget):
             self.cutoff_curve.setData(cutoff[:, b] / 1e3, n)
         amp = scan.amplitudes[ai] * (1e6 if scan.amplitude_units == "m" else 1)
         unit = "um" if scan.amplitude_units == "m" else "Vpp"
+        x_mark = f_khz[0] + 0.03 * (f_khz[-1] - f_khz[0])
+        self.failed_marks.setData(
+            np.full(self.n_failed, x_mark), scan.cylinders[failed].astype(float)
+        )
         self.setTitle(
             f"spatial-frequency map: {scan.direction}, {amp:.3g} {unit} "
-            f"({self.n_rows}/{len(cyl)} cylinders)"
+            f"({self.n_rows}/{len(cyl)} cylinders"
+            + (f", {self.n_failed} failed: red x" if self.n_failed else "")
+            + ")"
         )
         self.setXRange(f_khz[0], f_khz[-1], padding=0)
         self.setYRange(0.5, n_rows + 0.5, padding=0)
@@ -273,12 +292,22 @@ class SweepView(pg.PlotWidget):
         )
         self.colorbar.setImageItem(self.image, insert_in=self.getPlotItem())
         self.setTitle("amplitude sweep: |V(f_in)| per cylinder (one amplitude per row)")
+        self.failed_marks = pg.ScatterPlotItem(
+            symbol="x", size=14, pen=pg.mkPen(_FAILED_RGB, width=3), brush=None
+        )
+        self.failed_marks.setZValue(11)
+        self.addItem(self.failed_marks)
         self.n_cells = 0
+        self.n_failed = 0
 
     def show_sweep(self, scan: ScanView) -> None:
         a = scan.at_input  # [A, C]
         finite = np.isfinite(a) & (a > 0)
         self.n_cells = int(np.count_nonzero(finite))
+        self.n_failed = int(np.count_nonzero(scan.failed))
+        order = np.argsort(scan.cylinders)
+        rows, cols = np.nonzero(scan.failed[:, order])
+        self.failed_marks.setData(cols + 1.0, rows.astype(float))  # every amplitude's row
         if not finite.any():
             self.image.clear()
             return
@@ -286,8 +315,9 @@ class SweepView(pg.PlotWidget):
             row_max = np.max(np.where(finite, a, 0.0), axis=1, keepdims=True)
             img = np.log10(np.where(finite, a / np.where(row_max > 0, row_max, 1.0), np.nan))
         lo = max(float(np.nanmin(img)), -4.0)
-        img = np.where(np.isfinite(img), img, lo - 1)
-        order = np.argsort(scan.cylinders)
+        # a measured cell below the scale keeps its lowest colour; a missing one is NaN, drawn
+        # transparent: both were the lowest colour before
+        img = np.where(np.isfinite(img), np.maximum(img, lo), np.nan)
         img = img[:, order]
         self.image.setImage(img, levels=(lo, 0.0))
         self.colorbar.setLevels((lo, 0.0))
@@ -301,7 +331,8 @@ class SweepView(pg.PlotWidget):
             [[(k, f"{v * scale:.3g} {unit}") for k, v in enumerate(scan.amplitudes)]]
         )
         self.setLabel("left", "amplitude")
-        self.setTitle(f"amplitude sweep ({scan.direction}): |V(f_in)|, normalised per row")
+        failed = f"; {self.n_failed} failed: red x" if self.n_failed else ""
+        self.setTitle(f"amplitude sweep ({scan.direction}): |V(f_in)|, normalised per row{failed}")
 
 
 class LiveViews(QTabWidget):
@@ -401,6 +432,10 @@ class LiveViews(QTabWidget):
             self.sweep.image.clear()
         else:
             self.trace.show_trace(tr)
+            if data.n_failed:  # the trace is the last measured point, not the last tried
+                self.trace.p_vel.setTitle(
+                    f"{self.trace.p_vel.titleLabel.text}  ·  {data.n_failed} point(s) failed"
+                )
             scan = data.scans.get(tr.direction)
             f_in = scan.f_center_Hz if scan is not None else None
             self.spectrum.show_spectrum(tr, f_in or 0.0, data.chain)

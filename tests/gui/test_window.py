@@ -605,3 +605,36 @@ def test_resume_file_continues_the_files_own_protocol(qtbot: Any, tmp_path: Path
     assert blocker.args == ["complete"], win.log_view.lines[-3:]
     assert read_run(f).status == "complete"
     assert read_run(f).attrs["protocol_yaml"].startswith(alt.read_text()[:40])
+
+
+def test_failed_points_are_marked_in_the_live_views(
+    qtbot: Any, tmp_path: Path, screenshots: Path
+) -> None:
+    """Failed points were not handled by the window: the maps showed them as cells not
+    measured yet, and the colour of a missing cell was the scale's lowest, that of a quiet
+    measured one (a second reader: 4 of 6 points failed, none visible)."""
+
+    def nan_reads(bf: Any, seed: int | None) -> Any:
+        return connect_bench(bf, seed=seed, faults={"digitiser_nan": True, "after_acquisitions": 4})
+
+    win = MainWindow(None, SMOKE, assembler=nan_reads)
+    qtbot.addWidget(win)
+    win.show()
+    win.run_panel.out_edit.setText(str(tmp_path / "f.h5"))
+    connect(qtbot, win)
+    with qtbot.waitSignal(win.run_finished, timeout=60_000):
+        win.run_panel.start_button.click()
+    win._redraw()
+    n_failed = int(np.sum(read_run(tmp_path / "f.h5").scans["ltr"].done == PointState.FAILED))
+    assert n_failed >= 3 and win.live.n_failed == n_failed
+    sweep = win.views.sweep
+    assert sweep.n_failed == n_failed and len(sweep.failed_marks.data) == n_failed
+    assert "failed: red x" in sweep.plotItem.titleLabel.text
+    img = sweep.image.image
+    assert int(np.isnan(img).sum()) == n_failed  # outside the colour scale, not its lowest
+    win.views.setCurrentWidget(sweep)
+    sweep.grab().save(str(screenshots / "window_failed_points.png"))
+    assert "point(s) failed" in win.views.trace.p_vel.titleLabel.text
+    win.open_run_file(tmp_path / "f.h5")
+    qtbot.waitUntil(lambda: "opened f.h5" in win.log_view.lines[-1], timeout=10_000)
+    assert f"{n_failed} failed" in win.log_view.lines[-1]
