@@ -84,6 +84,9 @@ class MainWindow(QMainWindow):
     run_finished = Signal(str)
     #: emitted when a bench connection attempt ends (True: connected)
     connected = Signal(bool)
+    #: (phase, elapsed s, cache folder, cold) of a first-use compilation of the DEM kernel, from
+    #: whichever thread compiles (the run engine's): shown on the GUI thread
+    compile_progress = Signal(str, float, str, bool)
 
     def __init__(
         self,
@@ -138,6 +141,19 @@ class MainWindow(QMainWindow):
             getattr(sim_backend.dem, name)
 
         self._build()
+        # the kernel compiles on the engine's thread at the first simulated point: said here,
+        # as the command line says it (the window showed "homing the stage" for 18 s)
+        from sim_backend.dem.kernel_cache import set_compile_reporter
+
+        self.compile_progress.connect(self._show_compile)
+
+        def report(phase: str, t: float, folder: Any, cold: bool) -> None:
+            try:
+                self.compile_progress.emit(phase, t, str(folder), cold)
+            except RuntimeError:  # the window is gone: nothing to show it in
+                pass
+
+        self._previous_reporter = set_compile_reporter(report)
         self._redraw_timer = QTimer(self)
         self._redraw_timer.setInterval(REDRAW_MS)
         self._pace = RedrawPace()
@@ -667,6 +683,10 @@ class MainWindow(QMainWindow):
         detach(getattr(self, "_run_log", None))
         self._run_log: logging.Handler | None = attach_run_log(out)
         self.log(f"{'resuming' if resume else 'starting'} run -> {shown_path(out)}")
+        if bf.bench.simulation is not None:  # said now, before homing, when nothing is on disk
+            from sim_backend.dem.kernel_cache import announce_if_cold
+
+            announce_if_cold()
         engine.start()
         return True
 
@@ -799,6 +819,21 @@ class MainWindow(QMainWindow):
         detach(getattr(self, "_run_log", None))
         self._run_log = None
         self.run_finished.emit(status)
+
+    def _show_compile(self, phase: str, elapsed_s: float, folder: str, cold: bool) -> None:
+        what = "compiling" if cold else "loading or recompiling"
+        if phase == "start":
+            self.log(
+                f"{what} the DEM kernel for this machine: once per installation, usually 5-20 s; "
+                f"kept in {folder} (`biafc warmup` does it ahead of time)"
+            )
+        if phase in ("start", "tick"):
+            self.run_panel.where_label.setText(
+                f"{what} the DEM kernel (once per installation) ... {elapsed_s:.0f} s"
+            )
+        elif phase == "done":
+            self.log(f"DEM kernel ready after {elapsed_s:.1f} s")
+            self.run_panel.where_label.setText(f"DEM kernel ready after {elapsed_s:.1f} s")
 
     def _clear_unsafe_mark(self) -> None:
         """Take down the bench panel's "UNSAFE" of an earlier run (once a Safe state has
@@ -976,6 +1011,9 @@ class MainWindow(QMainWindow):
 
     def _finish_close(self, event: QCloseEvent) -> None:
         self._redraw_timer.stop()
+        from sim_backend.dem.kernel_cache import set_compile_reporter
+
+        set_compile_reporter(self._previous_reporter)
         if self.instruments is not None:
             try:
                 self.instruments.close()

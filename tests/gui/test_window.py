@@ -638,3 +638,32 @@ def test_failed_points_are_marked_in_the_live_views(
     win.open_run_file(tmp_path / "f.h5")
     qtbot.waitUntil(lambda: "opened f.h5" in win.log_view.lines[-1], timeout=10_000)
     assert f"{n_failed} failed" in win.log_view.lines[-1]
+
+
+def test_the_first_compile_of_the_model_is_said_in_the_window(
+    qtbot: Any, window: MainWindow
+) -> None:
+    """The first simulated run compiles the DEM kernel on the engine's thread (20-80 s): the
+    window showed "homing the stage" all that time, where the command line says what happens.
+    The kernel's reporter now reaches the window, from whichever thread compiles."""
+    import threading
+
+    from sim_backend.dem import kernel_cache
+
+    reporter = kernel_cache._REPORTER
+    assert reporter is not None
+
+    def compile_elsewhere() -> None:
+        reporter("start", 0.0, Path("/cache/numba"), True)
+        reporter("tick", 3.0, Path("/cache/numba"), True)
+
+    t = threading.Thread(target=compile_elsewhere)
+    t.start()
+    t.join()
+    qtbot.waitUntil(lambda: "... 3 s" in window.run_panel.where_label.text(), timeout=5000)
+    assert "compiling the DEM kernel (once per installation)" in (
+        window.run_panel.where_label.text()
+    )
+    assert any("compiling the DEM kernel for this machine" in ln for ln in window.log_view.lines)
+    reporter("done", 21.5, Path("/cache/numba"), True)
+    assert window.log_view.lines[-1].endswith("DEM kernel ready after 21.5 s")
