@@ -515,18 +515,26 @@ class MainWindow(QMainWindow):
         except (ConfigError, RequestError) as exc:
             self.protocol_file, self.plan = None, None
             self.protocol_panel.show_error(str(exc))
+            self._set_startable(False)
             return
         except Exception as exc:  # a schema corner the validators did not word
             self.protocol_file, self.plan = None, None
             self.protocol_panel.show_error(f"{source}: {type(exc).__name__}: {exc}")
+            self._set_startable(False)
             return
         self.protocol_file, self.plan = pf, plan
+        self._set_startable(True)
         summary = f"{proto.name}: valid"
         if plan is not None:
             summary += f", {plan.n_points} points, estimated {format_duration(plan.estimated_s)}"
         self.protocol_panel.show_ok(summary, _protocol_fields(proto, plan))
         if self.chain is not None:
             self.views.show_chain(self.chain, self._f_in())
+
+    def _set_startable(self, ok: bool) -> None:
+        """Start and Dry run only with a valid protocol (they only logged a refusal before)."""
+        self.run_panel.set_startable(ok)
+        self.protocol_panel.dry_button.setEnabled(ok)
 
     def _f_in(self, pf: Any = None) -> float | None:
         """The input frequency (Hz) the bands view marks: of protocol ``pf`` (default: the
@@ -758,10 +766,18 @@ class MainWindow(QMainWindow):
                 self._dirty = True
             elif k == EventKind.PROGRESS:
                 self.run_panel.show_progress(d)
+                if self.engine is not None and self.engine.state.value == "paused":
+                    self.run_panel.where_label.setText(  # the point in flight, then paused
+                        "paused (after the point in flight): Resume to go on"
+                    )
             # the engine records its own events in the run's log and file: shown here only
             elif k == EventKind.STATE_CHANGED:
                 self.run_panel.set_state(str(d["state"]))
                 self.log(f"run {d['state']}", record=False)
+                if d["state"] == "paused":  # the line kept the last ETA, as if running
+                    self.run_panel.where_label.setText(
+                        "paused (after the point in flight): Resume to go on"
+                    )
             elif k == EventKind.RUN_STARTED:
                 self.log(
                     f"run {shown_path(d['path'])}: {d['n_todo']} of {d['n_points']} points to "

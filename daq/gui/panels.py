@@ -243,12 +243,17 @@ class RunPanel(QGroupBox):
         self._blocked = blocked
         self.set_state(self._state)
 
+    def set_startable(self, startable: bool) -> None:
+        """Start only with a valid protocol in the editor (Resume file takes the file's)."""
+        self._startable = startable
+        self.set_state(self._state)
+
     def set_state(self, state: str) -> None:
         """Enable the buttons that make sense in engine state ``state``."""
         self._state = state
         active = state in ("running", "paused", "starting")
         free = not active and not getattr(self, "_blocked", False)
-        self.start_button.setEnabled(free)
+        self.start_button.setEnabled(free and getattr(self, "_startable", True))
         self.resume_file_button.setEnabled(free)
         self.pause_button.setEnabled(state == "running")
         self.resume_button.setEnabled(state == "paused")

@@ -105,6 +105,8 @@ def test_pause_resume_abort_buttons(qtbot: Any, tmp_path: Path) -> None:
     wait_until(qtbot, lambda: rp.resume_button.isEnabled())
     assert win.engine.state.value == "paused"
     qtbot.wait(800)  # the point in flight (2 reads of 0.25 s) completes
+    win._on_events()
+    assert win.run_panel.where_label.text().startswith("paused")  # it kept the last ETA
     n_paused = win.live.n_points
     qtbot.wait(500)
     assert win.live.n_points == n_paused, "points measured while paused"
@@ -149,12 +151,16 @@ def test_validation_error_shown_in_protocol_panel(qtbot: Any, window: MainWindow
     assert pp.fields.topLevelItemCount() == 0
     assert not window.start_run()
     assert window.engine is None
+    # Start and Dry run wait for a valid protocol (they were enabled, and only logged a refusal)
+    assert not window.run_panel.start_button.isEnabled() and not pp.dry_button.isEnabled()
+    assert window.run_panel.resume_file_button.isEnabled()  # a resume runs the file's protocol
     pp.editor.setPlainText(text.replace("cylinders: [1, 8, 16]", "cylinders: [1, 8, 99]"))
     qtbot.waitUntil(lambda: "99" in pp.status_label.text(), timeout=2000)
     assert not pp.valid
     pp.editor.setPlainText(text)
     qtbot.waitUntil(lambda: pp.valid, timeout=2000)
     assert "6 points" in pp.status_label.text()
+    assert window.run_panel.start_button.isEnabled() and pp.dry_button.isEnabled()
 
 
 def test_the_window_refuses_what_run_protocol_refuses_as_typed(
