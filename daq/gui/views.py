@@ -127,7 +127,12 @@ class SpectrumView(pg.PlotWidget):
             b = _resonance_band(onset, cutoff)
             self.band.setRegion((onset[i, b] / 1e3, cutoff[i, b] / 1e3))
             self.band.show()
-        self.setTitle(f"spectrum: {tr.direction}, cylinder {tr.cylinder} (band shaded)")
+        amp = f"{tr.amplitude * (1e6 if tr.amplitude_units == 'm' else 1):.3g}"
+        unit = "um" if tr.amplitude_units == "m" else "Vpp"
+        self.setTitle(
+            f"spectrum: {tr.direction}, amplitude {amp} {unit}, cylinder {tr.cylinder} "
+            "(band shaded)"
+        )
         self.n_drawn = int(np.count_nonzero(np.isfinite(mag)))
 
 
@@ -253,6 +258,14 @@ class BandView(pg.PlotWidget):
         )
         self.n_bands = 0
         self._items: list[object] = []
+
+    def set_input(self, f_in_Hz: float) -> None:
+        """Move the input line to ``f_in_Hz`` (the direction being measured: it stayed at the
+        first direction's 8.92 kHz through an rtl scan)."""
+        self.input_line.setValue(f_in_Hz / 1e3)
+        if self.input_line not in self._items:
+            self.addItem(self.input_line)
+            self._items.append(self.input_line)
 
     def show_chain(self, chain: ChainInfo | None, f_in_Hz: float | None = None) -> None:
         for it in self._items:
@@ -439,6 +452,8 @@ class LiveViews(QTabWidget):
             scan = data.scans.get(tr.direction)
             f_in = scan.f_center_Hz if scan is not None else None
             self.spectrum.show_spectrum(tr, f_in or 0.0, data.chain)
+            if f_in is not None:
+                self.bands.set_input(f_in)
             if scan is not None:
                 ai = int(np.argmin(np.abs(scan.amplitudes - tr.amplitude)))
                 self.spatial.show_map(scan, ai, data.chain)

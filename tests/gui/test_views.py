@@ -73,3 +73,20 @@ def test_paths_shown_relative_to_the_working_folder(
     assert shown_path(tmp_path / "runs" / "a.h5") == str(Path("runs") / "a.h5")
     outside = tmp_path.parent / "elsewhere.h5"
     assert shown_path(outside) == str(outside)
+
+
+def test_the_bands_and_spectrum_follow_the_direction_being_measured(qtbot: Any) -> None:
+    """During an rtl scan the Quasi-bands tab kept the ltr burst's 8.92 kHz, and the spectrum's
+    title had no amplitude (a second reader, directions: both)."""
+    views = LiveViews()
+    qtbot.addWidget(views)
+    live = LiveData()
+    for d, f in (("ltr", 8.92e3), ("rtl", 6.63e3)):
+        live.scans[d] = ScanView.empty(
+            d, f, np.array([2e-6]), "m", np.array([1, 2], np.int32), 30_000, 1e6
+        )
+    views.show_chain(None, 8.92e3)
+    live.add_point({**_big_point(), "direction": "rtl", "cylinder": 31})
+    views.redraw(live)
+    assert views.bands.input_line.value() == pytest.approx(6.63)
+    assert "amplitude 2 um" in views.spectrum.plotItem.titleLabel.text
