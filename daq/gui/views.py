@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 import pyqtgraph as pg
 from numpy.typing import NDArray
-from PySide6.QtWidgets import QCheckBox, QTabWidget, QWidget
+from PySide6.QtWidgets import QCheckBox, QComboBox, QHBoxLayout, QTabWidget, QWidget
 
 from daq.gui import refcount_guard
 from daq.gui.decimate import minmax_decimate
@@ -348,6 +348,14 @@ class SweepView(pg.PlotWidget):
         self.setTitle(f"amplitude sweep ({scan.direction}): |V(f_in)|, normalised per row{failed}")
 
 
+#: the maps' choice that shows the point being measured
+FOLLOW = "maps: following the run"
+
+
+def _amp_text(amplitude: float, units: str) -> str:
+    return f"{amplitude * 1e6:.3g} um" if units == "m" else f"{amplitude:.3g} Vpp"
+
+
 class LiveViews(QTabWidget):
     """The tabs of live views, redrawn from a :class:`LiveData`."""
 
@@ -371,7 +379,18 @@ class LiveViews(QTabWidget):
         )
         self.model_box.setChecked(False)
         self.model_box.toggled.connect(self._model_toggled)
-        self.setCornerWidget(self.model_box)
+        # which direction and amplitude the two maps show: the point being measured, or one
+        # chosen (before, only the last; a run of both directions hid the first after it)
+        self.map_choice = QComboBox()
+        self.map_choice.setToolTip("what the spatial-frequency and amplitude-sweep maps show")
+        self.map_choice.addItem(FOLLOW, None)
+        self.map_choice.currentIndexChanged.connect(self._choice_changed)
+        corner = QWidget()
+        row = QHBoxLayout(corner)
+        row.setContentsMargins(0, 0, 4, 0)
+        row.addWidget(self.map_choice)
+        row.addWidget(self.model_box)
+        self.setCornerWidget(corner)
         self.overlay: Any = None
         self._data: LiveData | None = None
         self._pending: set[tuple[Any, ...]] = set()
@@ -431,6 +450,30 @@ class LiveViews(QTabWidget):
             peaks = np.where((pred.peak_Hz >= lo) & (pred.peak_Hz <= hi), pred.peak_Hz, np.nan)
             self.spatial.show_model_peaks(peaks)
 
+    def _choice_changed(self, _: int) -> None:
+        if self._data is not None:
+            self.redraw(self._data)
+
+    def _update_choices(self, data: LiveData) -> None:
+        """One entry per direction and amplitude of ``data``, after "following the run"."""
+        wanted = [
+            (f"{d} {_amp_text(float(a), scan.amplitude_units)}", (d, ai))
+            for d, scan in data.scans.items()
+            for ai, a in enumerate(scan.amplitudes)
+        ]
+        have = [self.map_choice.itemData(i) for i in range(1, self.map_choice.count())]
+        if have == [key for _, key in wanted]:
+            return
+        current = self.map_choice.currentData()
+        self.map_choice.blockSignals(True)
+        self.map_choice.clear()
+        self.map_choice.addItem(FOLLOW, None)
+        for text, key in wanted:
+            self.map_choice.addItem(text, key)
+        k = self.map_choice.findData(current) if current is not None else 0
+        self.map_choice.setCurrentIndex(max(k, 0))
+        self.map_choice.blockSignals(False)
+
     def redraw(self, data: LiveData) -> None:
         """Draw everything from ``data`` (called at most a few times a second)."""
         tr = data.last
@@ -454,7 +497,13 @@ class LiveViews(QTabWidget):
             self.spectrum.show_spectrum(tr, f_in or 0.0, data.chain)
             if f_in is not None:
                 self.bands.set_input(f_in)
-            if scan is not None:
+            self._update_choices(data)
+            chosen = self.map_choice.currentData()
+            if chosen is not None and chosen[0] in data.scans:  # one the person picked
+                d, ai = chosen
+                self.spatial.show_map(data.scans[d], int(ai), data.chain)
+                self.sweep.show_sweep(data.scans[d])
+            elif scan is not None:
                 ai = int(np.argmin(np.abs(scan.amplitudes - tr.amplitude)))
                 self.spatial.show_map(scan, ai, data.chain)
                 self.sweep.show_sweep(scan)

@@ -90,3 +90,26 @@ def test_the_bands_and_spectrum_follow_the_direction_being_measured(qtbot: Any) 
     views.redraw(live)
     assert views.bands.input_line.value() == pytest.approx(6.63)
     assert "amplitude 2 um" in views.spectrum.plotItem.titleLabel.text
+
+
+def test_the_maps_show_any_direction_and_amplitude_chosen(qtbot: Any) -> None:
+    """The maps showed only the point being measured: after a run of both directions the ltr
+    data could not be viewed in the window at all (a second reader)."""
+    views = LiveViews()
+    qtbot.addWidget(views)
+    live = LiveData()
+    for d, f in (("ltr", 8.92e3), ("rtl", 6.63e3)):
+        live.scans[d] = ScanView.empty(
+            d, f, np.array([1e-6, 2e-6]), "m", np.array([1, 2], np.int32), 30_000, 1e6
+        )
+    live.add_point({**_big_point(), "amplitude_index": 1})  # ltr, 2 um, cylinder 1
+    live.add_point({**_big_point(), "direction": "rtl", "amplitude_index": 1, "cylinder": 31})
+    views.redraw(live)
+    assert "rtl" in views.spatial.plotItem.titleLabel.text  # following the run
+    texts = [views.map_choice.itemText(i) for i in range(views.map_choice.count())]
+    assert texts == ["maps: following the run", "ltr 1 um", "ltr 2 um", "rtl 1 um", "rtl 2 um"]
+    views.map_choice.setCurrentIndex(2)  # ltr 2 um: redrawn at once
+    assert "ltr, 2 um" in views.spatial.plotItem.titleLabel.text
+    assert "(ltr)" in views.sweep.plotItem.titleLabel.text
+    views.redraw(live)  # a new point does not take the choice away
+    assert views.map_choice.currentText() == "ltr 2 um"
