@@ -201,14 +201,14 @@ class SpatialMapView(pg.PlotWidget):
         # not measured (or failed): NaN, drawn transparent, outside the colour scale; it was
         # set below the scale and clipped to its lowest colour, as a quiet measured cell
         img = np.where(finite, img, np.nan)
-        # one row per cylinder number 1..n: a measured cylinder fills the rows nearest to it
-        # (sparse protocols), so the rows line up with the band edges drawn per cylinder
+        # one row per cylinder number 1..n, so the rows line up with the band edges drawn per
+        # cylinder; a cylinder not scanned is empty (it took its nearest scanned neighbour's
+        # spectrum, as if measured: the figures' maps leave such gaps too)
         cyl = np.sort(scan.cylinders)
         onset, cutoff = _band_arrays(chain)
         n_rows = int(max(int(cyl[-1]), onset.shape[0] if onset.size else 0))
-        rows = np.arange(1, n_rows + 1)
-        nearest = np.abs(rows[:, None] - scan.cylinders[None, :].astype(float)).argmin(axis=1)
-        grid = img[nearest]
+        grid = np.full((n_rows, img.shape[1]), np.nan)
+        grid[scan.cylinders.astype(int) - 1] = img
         f_khz = scan.freq_Hz / 1e3
         self.image.setImage(grid, levels=(lo, hi))
         self.colorbar.setLevels((lo, hi))

@@ -113,3 +113,20 @@ def test_the_maps_show_any_direction_and_amplitude_chosen(qtbot: Any) -> None:
     assert "(ltr)" in views.sweep.plotItem.titleLabel.text
     views.redraw(live)  # a new point does not take the choice away
     assert views.map_choice.currentText() == "ltr 2 um"
+
+
+def test_the_live_map_leaves_cylinders_not_scanned_empty(qtbot: Any) -> None:
+    """A scan of cylinders 1 and 8 filled rows 2-7 with their nearest neighbour's spectrum, as
+    if measured (the figures' maps now leave such gaps too)."""
+    views = LiveViews()
+    qtbot.addWidget(views)
+    live = LiveData()
+    live.scans["ltr"] = ScanView.empty(
+        "ltr", 8.92e3, np.array([2e-6]), "m", np.array([1, 8], np.int32), 30_000, 1e6
+    )
+    live.add_point(_big_point())
+    live.add_point({**_big_point(), "cylinder_index": 1, "cylinder": 8})
+    views.redraw(live)
+    grid = views.spatial.image.image  # [rows = cylinders 1..8, F]
+    measured = np.isfinite(grid).any(axis=1)
+    assert list(np.nonzero(measured)[0] + 1) == [1, 8]
