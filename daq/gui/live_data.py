@@ -112,7 +112,6 @@ class LiveData:
     bursts: dict[str, Burst] = field(default_factory=dict)
     last: Trace | None = None
     n_points: int = 0
-    n_failed: int = 0
     #: the last point that failed (direction, amplitude, units, cylinder, reason), or None
     last_failed: tuple[str, float, str, int, str] | None = None
 
@@ -174,13 +173,17 @@ class LiveData:
         self.n_points += 1
         return self.last
 
+    @property
+    def n_failed(self) -> int:
+        """Points failed now (a resumed run that measures one takes it off)."""
+        return sum(int(np.count_nonzero(scan.failed)) for scan in self.scans.values())
+
     def add_failed(self, data: dict[str, Any]) -> None:
         """Take a ``point_failed`` event's data: the point is marked failed in its maps."""
         d = str(data["direction"])
         scan = self.scans.get(d)
         if scan is not None:
             scan.mark_failed(int(data["amplitude_index"]), int(data["cylinder_index"]))
-        self.n_failed += 1
         self.last_failed = (
             d,
             float(data["amplitude"]),
@@ -205,7 +208,6 @@ class LiveData:
             )
             out.scans[d] = view
             view.failed = np.asarray(s.done == PointState.FAILED)
-            out.n_failed += int(np.count_nonzero(view.failed))
             done = s.is_done()
             for ai, ci in zip(*np.nonzero(done), strict=True):
                 v = np.asarray(s.velocity[ai, ci], np.float64)

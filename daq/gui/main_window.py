@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import logging
 import signal
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -132,6 +133,10 @@ class MainWindow(QMainWindow):
         #: what works on the instruments now, besides a run (a Safe state, a read of their
         #: state): Start waits for them
         self._busy: list[str] = []
+        #: held by every worker of the window that talks to the instruments (a read of their
+        #: state, the Safe state, closing them): one at a time on the transports, without the
+        #: GUI thread waiting (the Safe state clicked during the post-run read ran beside it)
+        self._instrument_lock = threading.Lock()
         # the model (numba, the compiled kernel, the chain's tools) loads here, before the
         # window turns, not on the event loop or beside it when the first run starts
         import analysis.model_overlay  # noqa: F401
@@ -141,6 +146,7 @@ class MainWindow(QMainWindow):
             getattr(sim_backend.dem, name)
 
         self._build()
+        self._set_startable(False)  # until a protocol in the editor validates
         # the kernel compiles on the engine's thread at the first simulated point: said here,
         # as the command line says it (the window showed "homing the stage" for 18 s)
         from sim_backend.dem.kernel_cache import set_compile_reporter
@@ -153,6 +159,7 @@ class MainWindow(QMainWindow):
             except RuntimeError:  # the window is gone: nothing to show it in
                 pass
 
+        self._report = report
         self._previous_reporter = set_compile_reporter(report)
         self._redraw_timer = QTimer(self)
         self._redraw_timer.setInterval(REDRAW_MS)
@@ -173,6 +180,15 @@ class MainWindow(QMainWindow):
             button.setEnabled(not active)
         bp.refresh_button.setEnabled(not active and self.instruments is not None)
         pp.editor.setReadOnly(active)
+
+    def _locked(self, fn: Callable[[], Any]) -> Callable[[], Any]:
+        """``fn`` run under the window's instrument lock (on the worker that calls it)."""
+
+        def call() -> Any:
+            with self._instrument_lock:
+                return fn()
+
+        return call
 
     def _hold_instruments(self, what: str) -> None:
         self._busy.append(what)
@@ -353,7 +369,7 @@ class MainWindow(QMainWindow):
         if inst is not None and inst is self._safe_busy:
             self._close_after_safe = True  # the Safe state's end closes them
         elif inst is not None:
-            BackgroundCall(inst.close, lambda r, e: None, name="biafc-gui-close")
+            BackgroundCall(self._locked(inst.close), lambda r, e: None, name="biafc-gui-close")
         self.bench_panel.set_connected(False)
 
     def connect_bench(self) -> None:
@@ -382,7 +398,9 @@ class MainWindow(QMainWindow):
             self.bench_panel.status_label.setText(f"✗ {msg}")
             self.bench_panel.set_connected(False)
             self.log(msg, "error")
-            self._pending_start = None
+            if self._pending_start is not None:  # the start it waited for does not happen
+                self._pending_start = None
+                self.run_panel.set_state("idle")
             self.connected.emit(False)
             return
         inst, snap = result
@@ -424,7 +442,7 @@ class MainWindow(QMainWindow):
             self.bench_panel.status_label.setText(f"✗ {line}")
             self.log(line, "error")
 
-        BackgroundCall(inst.snapshot, done, name="biafc-gui-snapshot")
+        BackgroundCall(self._locked(inst.snapshot), done, name="biafc-gui-snapshot")
 
     def safe_state(self) -> None:
         """During a run: abort (the engine puts every instrument in its safe state).
@@ -461,7 +479,7 @@ class MainWindow(QMainWindow):
             self._release_instruments("the Safe state")
             if self._close_after_safe:  # disconnected meanwhile: closed now, after it
                 self._close_after_safe = False
-                BackgroundCall(inst.close, lambda r, e: None, name="biafc-gui-close")
+                BackgroundCall(self._locked(inst.close), lambda r, e: None, name="biafc-gui-close")
             if inst is self.instruments:
                 self.bench_panel.safe_button.setEnabled(True)
             if err is not None:
@@ -474,7 +492,7 @@ class MainWindow(QMainWindow):
             self._clear_unsafe_mark()  # confirmed now: the last run's UNSAFE no longer holds
             self.bench_panel.show_snapshot(snap)
 
-        BackgroundCall(work, done, name="biafc-gui-safe")
+        BackgroundCall(self._locked(work), done, name="biafc-gui-safe")
 
     # -- protocol --------------------------------------------------------------------------
     def _ask_protocol(self) -> None:
@@ -575,7 +593,7 @@ class MainWindow(QMainWindow):
         from daq.request import RequestError, validate_request
 
         try:  # the output too, as run_protocol --dry-run checks it (a complete run, no folder)
-            validate_request(self.protocol_file, self.bench_file, out=out)
+            out = validate_request(self.protocol_file, self.bench_file, out=out).out
         except RequestError as exc:
             self.log(f"dry run: refused: {exc}", "error")
             return
@@ -615,6 +633,7 @@ class MainWindow(QMainWindow):
         if self._busy:  # the buttons are disabled meanwhile; a call from code is refused
             self.log(f"cannot start yet: {self._busy[0]} is still working on the instruments",
                      "warning")  # fmt: skip
+            self.run_panel.set_state("idle")  # a start under way (a file read) ends here
             return False
         resume = resume_path is not None
         if not resume:  # a resumed run is the file's protocol, whatever the editor holds
@@ -686,10 +705,14 @@ class MainWindow(QMainWindow):
         self.run_panel.set_state("running")
         self.run_panel.where_label.setStyleSheet("")  # a refusal's red, before this run
         self._clear_unsafe_mark()
-        from daq.logsetup import attach_run_log, detach
+        from daq.logsetup import detach, hold_run_log
 
         detach(getattr(self, "_run_log", None))
-        self._run_log: logging.Handler | None = attach_run_log(out)
+        # opened once the run file is this window's (a run refused at its lock wrote into the
+        # other process's RUN.log), by the engine
+        held = hold_run_log(out)
+        engine.on_file_locked = held.open_file
+        self._run_log: logging.Handler | None = held
         self.log(f"{'resuming' if resume else 'starting'} run -> {shown_path(out)}")
         if bf.bench.simulation is not None:  # said now, before homing, when nothing is on disk
             from sim_backend.dem.kernel_cache import announce_if_cold
@@ -778,6 +801,10 @@ class MainWindow(QMainWindow):
                     self.run_panel.where_label.setText(
                         "paused (after the point in flight): Resume to go on"
                     )
+                elif d["state"] == "running" and self.run_panel.where_label.text().startswith(
+                    "paused"
+                ):
+                    self.run_panel.where_label.setText("running again")
             elif k == EventKind.RUN_STARTED:
                 self.log(
                     f"run {shown_path(d['path'])}: {d['n_todo']} of {d['n_points']} points to "
@@ -986,8 +1013,8 @@ class MainWindow(QMainWindow):
     def closeEvent(self, event: QCloseEvent) -> None:
         signum = self._stop_signal
         self._pending_start = self._prefilling = None  # a start under way does not go ahead
-        if not self.running and signum is not None:  # idle: the signal's own status
-            self.exit_status = 128 + signum
+        if not self.running and signum is not None and self.exit_status != 3:
+            self.exit_status = 128 + signum  # idle: the signal's own (an unsafe end's 3 stays)
         if self.running:
             if signum is None:
                 self._asking_close = True
@@ -1027,9 +1054,10 @@ class MainWindow(QMainWindow):
 
     def _finish_close(self, event: QCloseEvent) -> None:
         self._redraw_timer.stop()
-        from sim_backend.dem.kernel_cache import set_compile_reporter
+        from sim_backend.dem import kernel_cache
 
-        set_compile_reporter(self._previous_reporter)
+        if kernel_cache._REPORTER is self._report:  # not another window's, opened after this
+            kernel_cache.set_compile_reporter(self._previous_reporter)
         if self.instruments is not None:
             try:
                 self.instruments.close()

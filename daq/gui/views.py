@@ -195,7 +195,10 @@ class SpatialMapView(pg.PlotWidget):
         self.n_failed = int(np.count_nonzero(failed))
         if not finite.any() or scan.freq_Hz.size < 2:
             self.image.clear()
-            self.failed_marks.setData([], [])
+            x0 = float(scan.freq_Hz[0]) / 1e3 if scan.freq_Hz.size else 0.0
+            self.failed_marks.setData(  # every cylinder of this amplitude failed: still shown
+                np.full(self.n_failed, x0), scan.cylinders[failed].astype(float)
+            )
             return
         lo, hi = np.percentile(img[finite], [5, 100])
         # not measured (or failed): NaN, drawn transparent, outside the colour scale; it was
@@ -481,11 +484,18 @@ class LiveViews(QTabWidget):
         if tr is None:  # nothing measured (an empty run file): before, the last file's stayed
             self.trace.c_vel.setData([], [])
             self.trace.c_drv.setData([], [])
-            self.trace.p_vel.setTitle("no point measured")
+            failed = f" ({data.n_failed} failed)" if data.n_failed else ""
+            self.trace.p_vel.setTitle(f"no point measured{failed}")
             self.spectrum.curve.setData([], [])
             self.spatial.image.clear()
-            self.spatial.setTitle("spatial-frequency map: no point measured")
+            self.spatial.failed_marks.setData([], [])
+            self.spatial.setTitle(f"spatial-frequency map: no point measured{failed}")
             self.sweep.image.clear()
+            self.sweep.failed_marks.setData([], [])
+            for any_scan in data.scans.values():  # every point failed: the crosses still show
+                if any_scan.failed.any():
+                    self.sweep.show_sweep(any_scan)
+                    break
         else:
             self.trace.show_trace(tr)
             if data.n_failed:  # the trace is the last measured point, not the last tried

@@ -673,3 +673,39 @@ def test_the_first_compile_of_the_model_is_said_in_the_window(
     assert any("compiling the DEM kernel for this machine" in ln for ln in window.log_view.lines)
     reporter("done", 21.5, Path("/cache/numba"), True)
     assert window.log_view.lines[-1].endswith("DEM kernel ready after 21.5 s")
+
+
+def test_what_the_second_reader_found_in_the_window_fixes(qtbot: Any, tmp_path: Path) -> None:
+    """A failed connect with a start pending left the run panel 'starting' for ever; an empty
+    editor left Start enabled; a window closed first left the model's compile reporter pointing
+    at itself; a run where every point failed drew no cross."""
+    from sim_backend.dem import kernel_cache
+
+    def broken(bf: Any, seed: int | None) -> Any:
+        raise OSError("no such device")
+
+    empty = MainWindow(None, None, assembler=broken)
+    qtbot.addWidget(empty)
+    assert not empty.run_panel.start_button.isEnabled()  # nothing to start
+    win = MainWindow(None, SMOKE, assembler=broken)
+    qtbot.addWidget(win)
+    win.run_panel.out_edit.setText(str(tmp_path / "x.h5"))
+    with qtbot.waitSignal(win.connected, timeout=10_000):
+        win.run_panel.start_button.click()
+    assert win.run_panel.start_button.isEnabled() and not win.run_panel.abort_button.isEnabled()
+    empty.close()  # opened first, closed first: the reporter stays the open window's
+    assert kernel_cache._REPORTER is win._report
+    win.close()
+
+    def all_nan(bf: Any, seed: int | None) -> Any:
+        return connect_bench(bf, seed=seed, faults={"digitiser_nan": True})
+
+    bad = MainWindow(None, SMOKE, assembler=all_nan)
+    qtbot.addWidget(bad)
+    bad.run_panel.out_edit.setText(str(tmp_path / "all_failed.h5"))
+    connect(qtbot, bad)
+    with qtbot.waitSignal(bad.run_finished, timeout=60_000):
+        bad.run_panel.start_button.click()
+    bad._redraw()
+    assert bad.live.n_failed == 6 and len(bad.views.sweep.failed_marks.data) == 6
+    assert "6 failed" in bad.views.trace.p_vel.titleLabel.text
