@@ -404,13 +404,13 @@ def _connect(
 ) -> tuple[Any, Any]:
     from daq.connect import connect_bench
     from daq.engine import RunEngine
-    from instruments.errors import InstrumentError
+    from instruments.errors import DriverNotInstalledError, InstrumentError
     from protocols.yamlfile import ConfigError
 
     try:
         instruments = connect_bench(bf, seed=seed)
-    except ConfigError as exc:  # the bench file, a driver not installed, the bench in use
-        raise CliError(str(exc).splitlines()[0]) from None
+    except (ConfigError, DriverNotInstalledError) as exc:  # the bench file, the installation
+        raise CliError(str(exc).splitlines()[0]) from None  # (a driver), the bench in use: 2
     except InstrumentError as exc:  # an instrument that does not answer: not a refused request
         raise _ConnectFailed(str(exc).splitlines()[0]) from None
     engine = RunEngine(

@@ -377,3 +377,12 @@ def test_an_instrument_that_does_not_answer_at_connect_is_exit_1_not_a_refusal(
     assert last.endswith("nothing was switched on, no file written")
     assert not f.exists(), "file"
     assert not log_path_for(f).exists(), log_path_for(f).read_text()
+    # a driver that is not installed is the installation's problem: refused, exit 2, as before
+    from instruments.errors import DriverNotInstalledError
+
+    def no_driver(bf, seed=None, **k):  # type: ignore[no-untyped-def]
+        raise DriverNotInstalledError("digitiser: NI-DAQmx is not installed")
+
+    monkeypatch.setattr(daq.connect, "connect_bench", no_driver)
+    assert rp.main([str(proto_file), "--out", str(f), "--quiet"]) == 2
+    assert "NI-DAQmx is not installed" in _last_err(capsys)
