@@ -17,10 +17,11 @@ from typing import Any
 from instruments.units import format_quantity
 from protocols.schema import BOUNDS
 
-#: the largest output of ``biafc simulate`` (the velocity of every cylinder and the drive,
-#: float64): a run holds about four times its output while it runs (1.1 GB resident for 256 MB
-#: of output, 2 s at 500 kS/s), so this bound keeps a run near 2 GB
-MAX_SIMULATE_BYTES = 2**29
+#: the largest output of ``biafc simulate`` or a ``biafc regime`` batch (the velocity of every
+#: cylinder and the drive, float64): a run holds 3-4 times its output while it runs (resident:
+#: 1.1 GB for simulate's 256 MB, 2 s at 500 kS/s; 1.7 GB for regime's 492 MB, 128 amplitudes),
+#: so this bound keeps a run near 4 GB, and regime's largest --count (256) within it
+MAX_SIMULATE_BYTES = 2**30
 
 
 def _show(x: float, dimension: str) -> str:
@@ -46,12 +47,15 @@ def simulate_request_error(
     n_records: int,
     *,
     burst_option: str = "--frequency",
+    records_option: str | None = None,
 ) -> str | None:
     """Why a run of ``duration_s`` (s) at ``rate_Hz`` (S/s) with ``burst``
     (``instruments.burst.Burst``) recording ``n_records`` traces (every cylinder and the drive,
     of every trajectory of a batch) cannot be simulated, or None.
     ``burst_option``: the option that set the burst's length (``--cycles``, ``--width``,
-    ``--sigma-f``, ``--burst``), named when the burst does not fit the run."""
+    ``--sigma-f``, ``--burst``), named when the burst does not fit the run;
+    ``records_option``: the option that set ``n_records`` (``--count`` of a batch), named with
+    ``--duration`` when the output is too large."""
     for why in (
         within("--duration", duration_s, "duration", "time"),
         within("--rate", rate_Hz, "rate", "sample_rate"),
@@ -86,10 +90,12 @@ def simulate_request_error(
     samples = math.floor(duration_s * rate_Hz) + 1
     data = samples * n_records * 8
     if data > MAX_SIMULATE_BYTES:
+        lead = records_option or "--duration"
+        fewer = f"lower {records_option.split()[0]}, " if records_option else ""
         return (
-            f"--duration: the run's output would be {data / 2**20:,.0f} MiB ({samples:,} "
-            f"samples x {n_records} records x 8 bytes, about four times that in memory "
-            f"while it runs), above the bound of {MAX_SIMULATE_BYTES / 2**20:g} MiB; shorten "
+            f"{lead}: the run's output would be {data / 2**20:,.0f} MiB ({samples:,} "
+            f"samples x {n_records} records x 8 bytes, more than that in memory while it "
+            f"runs), above the bound of {MAX_SIMULATE_BYTES / 2**30:g} GiB; {fewer}shorten "
             "--duration or lower --rate"
         )
     return None
