@@ -19,7 +19,8 @@ from typing import Any
 
 from daq.cli.biafc import CliError
 from daq.cli.out_check import can_write
-from daq.cli.simulate_request import within
+from daq.cli.simulate_request import simulate_request_error, within
+from instruments.burst import Burst
 from instruments.units import UnitError, parse_quantity
 
 SCENE_CHOICES = ("linear", "highamp", "both")
@@ -85,6 +86,15 @@ def _scenes(args: argparse.Namespace) -> list[Any]:
             )
         if override is not None:
             scene = replace(scene, kind=override[0], amplitude=override[1])
+        # the scene's burst against its record, and its size (a reference run keeps every
+        # cylinder), as biafc simulate checks them
+        burst = Burst(scene.f_center_Hz, cycles=scene.cycles)
+        n_records = (spec.n_cylinders or len(spec.lengths or ())) + 1
+        why = simulate_request_error(
+            duration, rate, burst, n_records, burst_option="--scene", frequency_option=None
+        )
+        if why is not None:
+            raise CliError(why)
         out.append(scene)
     return out
 

@@ -108,7 +108,7 @@ def run(args: argparse.Namespace) -> int:
     for k, d in enumerate(directions):  # each burst against the record; the batch's size once
         why = simulate_request_error(
             duration, rate, bursts[d], len(drives) * (chain.n + 1) if k == 0 else 1,
-            burst_option=option, records_option=f"--count {args.count}",
+            burst_option=option, records_option=f"--count {args.count}", frequency_option=None,
         )  # fmt: skip
         if why is not None:
             raise CliError(why)

@@ -48,6 +48,7 @@ def simulate_request_error(
     *,
     burst_option: str = "--frequency",
     records_option: str | None = None,
+    frequency_option: str | None = "--frequency",
 ) -> str | None:
     """Why a run of ``duration_s`` (s) at ``rate_Hz`` (S/s) with ``burst``
     (``instruments.burst.Burst``) recording ``n_records`` traces (every cylinder and the drive,
@@ -55,11 +56,13 @@ def simulate_request_error(
     ``burst_option``: the option that set the burst's length (``--cycles``, ``--width``,
     ``--sigma-f``, ``--burst``), named when the burst does not fit the run;
     ``records_option``: the option that set ``n_records`` (``--count`` of a batch), named with
-    ``--duration`` when the output is too large."""
+    ``--duration`` when the output is too large; ``frequency_option``: the option that set
+    the burst's frequency (None: the command has none, and a burst above the Nyquist frequency
+    is said of ``--rate``)."""
     for why in (
         within("--duration", duration_s, "duration", "time"),
         within("--rate", rate_Hz, "rate", "sample_rate"),
-        within("--frequency", burst.f_center_Hz, "f_center", "frequency"),
+        within(frequency_option or "the burst", burst.f_center_Hz, "f_center", "frequency"),
     ):
         if why is not None:
             return why
@@ -80,12 +83,13 @@ def simulate_request_error(
         )
     f_top = burst.f_center_Hz + 3.0 * burst.sigma_f_Hz
     if f_top >= rate_Hz / 2:
+        lower = f" or lower {frequency_option}" if frequency_option else ""
         return (
-            f"--frequency: the {format_quantity(burst.f_center_Hz, 'frequency')} burst (up to "
-            f"{format_quantity(f_top, 'frequency')} with its band) is above the Nyquist "
-            f"frequency {format_quantity(rate_Hz / 2, 'frequency')} of --rate "
+            f"{frequency_option or '--rate'}: the {format_quantity(burst.f_center_Hz, 'frequency')}"
+            f" burst (up to {format_quantity(f_top, 'frequency')} with its band) is above the "
+            f"Nyquist frequency {format_quantity(rate_Hz / 2, 'frequency')} of --rate "
             f"{format_quantity(rate_Hz, 'sample_rate')}; record at more than "
-            f"{format_quantity(2 * f_top, 'sample_rate')} or lower --frequency"
+            f"{format_quantity(2 * f_top, 'sample_rate')}{lower}"
         )
     samples = math.floor(duration_s * rate_Hz) + 1
     data = samples * n_records * 8
