@@ -60,7 +60,10 @@ def resonance_band_index(chain: ChainInfo) -> int:
         o, c = onset[:, b], cutoff[:, b]
         if np.all(np.isfinite(o)) and np.all(o > 0) and np.all(c > o):
             return b
-    raise ValueError("the run file's /chain holds no band with a non-zero onset")
+    raise ValueError(
+        "the run file's /chain holds no local-resonance band with a non-zero onset (a chain "
+        "without preload has none): what needs its band edges cannot be drawn"
+    )
 
 
 def band_edges(
@@ -85,6 +88,8 @@ def expected_output_Hz(
     """
     n = len(onset_Hz)
     k = far_cylinder(direction, n) - 1
+    if not (math.isfinite(onset_Hz[k]) and math.isfinite(cutoff_Hz[k])):
+        return math.nan  # no band (a chain without preload): no edge to head for
     if f_in_Hz > cutoff_Hz[k]:
         return float(cutoff_Hz[k])
     if f_in_Hz < onset_Hz[k]:

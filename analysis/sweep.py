@@ -135,10 +135,14 @@ def output_peak_definition(sweep: AmplitudeSweep) -> str:
     """What ``output_Hz`` (``f_out``) is, in words: the one definition of the far-end peak that
     every command prints (``biafc simulate``, ``biafc figures``)."""
     lo, hi = sweep.f_range_Hz
+    where = (
+        "the bands' neighbourhood without the contacts' low-frequency drift and the harmonics"
+        if math.isfinite(sweep.expected_Hz)
+        else "half to one and a half times the input: the chain has no local-resonance band"
+    )
     return (
         f"far-end output peak f_out (largest line of cylinder {sweep.far}'s velocity spectrum "
-        f"in {lo / 1e3:.2f}-{hi / 1e3:.2f} kHz, the bands' neighbourhood without the contacts' "
-        "low-frequency drift and the harmonics)"
+        f"in {lo / 1e3:.2f}-{hi / 1e3:.2f} kHz, {where})"
     )
 
 

@@ -61,8 +61,9 @@ def plot_regime(sweeps: Mapping[str, AmplitudeSweep]) -> Figure:
             f_in = float(np.nanmedian(sw.input_Hz))
             ax_f.axhline(f_in / 1e3, color=colour, ls="--", lw=1,
                          label=f"{d.upper()} input {f_in / 1e3:.2f} kHz")  # fmt: skip
-            edge = f"{d.upper()} far-cylinder edge {sw.expected_Hz / 1e3:.2f} kHz"
-            ax_f.axhline(sw.expected_Hz / 1e3, color=colour, ls=":", lw=1.5, label=edge)
+            if np.isfinite(sw.expected_Hz):  # none without a local-resonance band
+                edge = f"{d.upper()} far-cylinder edge {sw.expected_Hz / 1e3:.2f} kHz"
+                ax_f.axhline(sw.expected_Hz / 1e3, color=colour, ls=":", lw=1.5, label=edge)
         ax_t.set_xscale("log")
         ax_t.set_yscale("log")
         ax_t.set_ylabel("far/near rms ratio")

@@ -136,7 +136,8 @@ def plot_amplitude_sweep(sweeps: Mapping[str, AmplitudeSweep]) -> Figure:
                     at=0.03 if d == "ltr" else 0.09,
                 )  # fmt: skip
                 f_in = float(np.nanmedian(sw.input_Hz))
-                ax.axvline((sw.expected_Hz - f_in) / 1e3, color=colour, ls=":", lw=1.5)
+                if np.isfinite(sw.expected_Hz):  # none without a local-resonance band
+                    ax.axvline((sw.expected_Hz - f_in) / 1e3, color=colour, ls=":", lw=1.5)
                 if _log_amplitudes(sw.amplitudes):
                     ax.set_yscale("log")
             ax.set_xlabel("detuning f_out - f_in (kHz)")

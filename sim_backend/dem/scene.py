@@ -216,7 +216,10 @@ class SceneResult:
 
 def overlap_ratio(chain: Chain, drive: Drive) -> float:
     """Predicted largest dynamic overlap change over delta0 (dimensionless): the wall's travel
-    (displacement drive, m) or ``F / K_lin`` (force drive, N) divided by ``chain.delta0_m``."""
+    (displacement drive, m) or ``F / K_lin`` (force drive, N) divided by ``chain.delta0_m``;
+    infinite for a chain without preload (delta0 = 0: every drive opens its contacts)."""
+    if not (chain.delta0_m > 0 and chain.K_lin > 0):
+        return math.inf if drive.amplitude > 0 else 0.0
     travel_m = drive.amplitude if drive.kind == "displacement" else drive.amplitude / chain.K_lin
     return travel_m / chain.delta0_m
 

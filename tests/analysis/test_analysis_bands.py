@@ -28,7 +28,7 @@ def test_resonance_band_found_with_and_without_the_acoustic_band() -> None:
     o1, c1 = band_edges(ch)
     o2, c2 = band_edges(only_lr)
     assert np.array_equal(o1, o2) and np.array_equal(c1, c2)
-    with pytest.raises(ValueError, match="no band"):
+    with pytest.raises(ValueError, match="no local-resonance band"):
         resonance_band_index(dataclasses.replace(ch, onset_Hz=np.zeros((31, 1))))
 
 

@@ -217,8 +217,6 @@ CASES: tuple[Case, ...] = (
          (*SIMULATE, "--sigma-f", "20kHz"), ("--sigma-f", "not below its centre frequency")),
     Case("simulate_cycles_100000", "biafc simulate --cycles 100000",
          (*SIMULATE, "--cycles", "100000"), ("--cycles: 100000 is outside 1 .. 1000",)),
-    Case("simulate_burst_longer", "biafc simulate --width 20ms (a burst longer than the run)",
-         (*SIMULATE, "--width", "20ms"), ("--width", "longer than the run")),
     Case("accuracy_rate_below_nyquist", "biafc accuracy --rate 2kS/s (the burst aliases)",
          ("biafc", "accuracy", "--scene", "linear", "--rate", "2kS/s"),
          ("--rate: the 8.92 kHz burst", "Nyquist frequency 1 kHz")),

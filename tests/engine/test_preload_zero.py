@@ -1,9 +1,11 @@
 """A chain without preload (``--set preload=0N``, the "sonic vacuum" the chain file allows):
-every command that worked on a preloaded chain works on it. Before, ``run_protocol
---dry-run`` ended in a ZeroDivisionError (the transit bound divides by the linear contact
-stiffness, 0 here), ``biafc simulate`` and ``biafc regime`` wrote their file and then a
-ValueError (no local-resonance band to search the output peak in), and ``biafc bands`` printed
-NaN cutoffs with numpy's warning (a cutoff of 0 came out of round-off as sqrt(-1e-9))."""
+the model's commands work on it (the dry run, bands, simulate with --explain and --lean,
+regime), and the figures that need a local-resonance band say in one line that it has none.
+Before, ``run_protocol --dry-run`` ended in a ZeroDivisionError (the transit bound divides by
+the linear contact stiffness, 0 here), ``biafc simulate`` and ``biafc regime`` wrote their file
+and then a ValueError (no local-resonance band to search the output peak in), ``--explain``
+divided by delta0 = 0, and ``biafc bands`` printed NaN cutoffs with numpy's warning (a cutoff
+of 0 came out of round-off as sqrt(-1e-9))."""
 
 from __future__ import annotations
 
@@ -40,5 +42,12 @@ def test_simulate_without_preload_writes_its_file_and_summary(
     assert biafc([*args, "--duration", "5ms", "--rate", "200kS/s", "--out", str(out)]) == 0
     text = capsys.readouterr().out
     assert "transmitted energy ratio" in text and "far-end output peak f_out" in text
-    assert "in 4.46-13.38 kHz" in text  # no band: searched around the input (8.92 kHz)
+    assert "in 4.46-13.38 kHz, half to one and a half times the input: the chain has no" in text
+    # --explain and --lean: the scene's overlap ratio divided by delta0 = 0
+    assert biafc([*args, "--explain"]) == 0
+    assert "overlap change inf delta0" in capsys.readouterr().out
+    figs = tmp_path / "figs"
+    assert biafc(["figures", str(out), "--out", str(figs)]) == 2  # no band: said, one line
+    err = capsys.readouterr().err.strip()
+    assert "no local-resonance band" in err and len(err.splitlines()) == 1
     assert out.exists()
