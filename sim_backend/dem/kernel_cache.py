@@ -40,6 +40,7 @@ __all__ = [
     "announce_if_cold",
     "cache_note",
     "compile_notice",
+    "expected_cache_folder",
     "install_cache_locator",
     "kernel_cache_dir",
     "kernel_cache_in_use",
@@ -139,12 +140,34 @@ def install_cache_locator() -> None:
     impl._locator_classes.insert(0, BiafcCacheLocator)
 
 
-def kernel_cached_on_disk() -> bool:
-    """Whether a compiled kernel is on disk where this process looks for it: ``$NUMBA_CACHE_DIR``
-    when set, else :func:`kernel_cache_dir` (cheap; a stale one, from other sources or another
-    numba, still recompiles)."""
+def _can_write(folder: Path) -> bool:
+    """Whether ``folder`` is, or can be made, a folder this process writes (its nearest existing
+    ancestor a writable folder); no file is created."""
+    here = folder
+    while not here.exists():
+        if here.parent == here:
+            return False
+        here = here.parent
+    return here.is_dir() and os.access(here, os.W_OK | os.X_OK)
+
+
+def expected_cache_folder() -> Path:
+    """Where numba will keep the kernel, without importing it: ``$NUMBA_CACHE_DIR`` when set,
+    :func:`kernel_cache_dir` when it can be written, else numba's own choice beside the
+    sources (``sim_backend/dem/__pycache__``)."""
     env = os.environ.get("NUMBA_CACHE_DIR")
-    folder = Path(env) if env else kernel_cache_dir()
+    if env:
+        return Path(env)
+    wanted = kernel_cache_dir()
+    return wanted if _can_write(wanted) else Path(__file__).resolve().parent / "__pycache__"
+
+
+def kernel_cached_on_disk() -> bool:
+    """Whether a compiled kernel is on disk where this process looks for it
+    (:func:`expected_cache_folder`; cheap: a stale one, from other sources or another numba,
+    still recompiles). It looked in the cache folder even where that could not be written,
+    and announced a compile at every run that loaded the kernel from beside the sources."""
+    folder = expected_cache_folder()
     try:
         return any(folder.rglob("kernel.run_chunks-*.nbi"))
     except OSError:
@@ -180,7 +203,7 @@ def announce_if_cold() -> bool:
     if "sim_backend.dem.kernel" in sys.modules and kernel_loaded():
         return False
     _ANNOUNCED = True
-    reporter("start", 0.0, kernel_cache_dir(), True)
+    reporter("start", 0.0, expected_cache_folder(), True)
     return True
 
 

@@ -176,3 +176,19 @@ def test_a_process_first_run_removes_an_earlier_sources_compiled_kernel(
     assert not any(path.exists() for path in planted)
     assert current.exists()
     assert kernel_cache.remove_stale_compiled() == []  # once per process
+
+
+def test_where_the_kernel_is_looked_for_follows_numbas_fallback(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """With a cache folder that cannot be written, numba keeps the kernel beside the sources,
+    but the check for a compiled kernel still looked in the cache folder: every run announced
+    a compile that did not happen (a second reader)."""
+    blocker = tmp_path / "a_file"
+    blocker.write_text("not a folder")
+    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
+    monkeypatch.setenv("BIAFC_CACHE_DIR", str(blocker / "cache"))
+    beside = Path(kernel_cache.__file__).resolve().parent / "__pycache__"
+    assert kernel_cache.expected_cache_folder() == beside
+    monkeypatch.setenv("BIAFC_CACHE_DIR", str(tmp_path / "new" / "cache"))  # can be made
+    assert kernel_cache.expected_cache_folder() == tmp_path / "new" / "cache" / "numba"
