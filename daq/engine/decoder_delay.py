@@ -37,9 +37,13 @@ def undo_decoder_delay(
 
     The record is extended by its mirror image before the transform, so that the periodic
     signal the transform assumes has no jump at either end; ``out`` near the record's end, where
-    ``t + delay`` lies past the last sample, holds the mirrored values. Within the record the
-    shift is exact for a signal below half the rate (an 8.92 kHz burst at 200 kS/s: about
-    1e-9 of its peak away from the ends, against 1e-2 for linear interpolation)."""
+    ``t + delay`` lies past the last sample, holds the mirrored values (the run engine reads
+    :func:`tail_samples` past its window, so none of them is kept). At the record's start the
+    mirror puts a kink: a record that does not start quiet (no pre-trigger) is off there by up
+    to 2e-4 of its amplitude over its first ~5 samples at 500 kS/s, a few per cent at 50 kS/s.
+    Within the record the shift is exact for a signal below half the rate (an 8.92 kHz burst
+    at 200 kS/s: about 1e-9 of its peak away from the ends, against 1e-2 for linear
+    interpolation)."""
     x = np.asarray(v, dtype=np.float64)
     n = x.shape[-1]
     if delay_s == 0.0 or n < 2:
