@@ -341,9 +341,21 @@ class Protocol(_Model):
                 raise ValueError("give at least one amplitude")
             if len(v) > 10_000:
                 raise ValueError(f"{len(v)} amplitudes; at most 10000")
-            kinds = {parse_amplitude(a)[0] for a in v}
+            parsed = [parse_amplitude(a) for a in v]
+            kinds = {k for k, _ in parsed}
             if len(kinds) > 1:
                 raise ValueError("mix of generator (Vpp) and displacement (m) amplitudes")
+            values = np.array([value for _, value in parsed])
+            order = np.argsort(values, kind="stable")  # neighbours once sorted: n log n
+            ranked = values[order]
+            same = np.isclose(ranked[1:], ranked[:-1], rtol=1e-9, atol=0.0)  # '0.5 um', '500 nm'
+            if same.any():  # as a cylinder listed twice is refused
+                k = int(np.argmax(same))
+                j, i = sorted((int(order[k]), int(order[k + 1])))
+                raise ValueError(
+                    f"amplitude {i + 1} ({v[i]}) is amplitude {j + 1} ({v[j]}) again: "
+                    "list each once"
+                )
             return [str(a) for a in v]
         return v
 
@@ -405,7 +417,11 @@ class Protocol(_Model):
         if sorted(self.order) != ["amplitude", "cylinder", "direction"]:
             raise ValueError("order: list direction, amplitude and cylinder once each")
         if isinstance(self.cylinders, list) and len(set(self.cylinders)) != len(self.cylinders):
-            raise ValueError("cylinders: a cylinder is listed twice")
+            twice = sorted({c for c in self.cylinders if self.cylinders.count(c) > 1})
+            raise ValueError(
+                f"cylinders: cylinder {', '.join(str(c) for c in twice)} is listed twice; "
+                "list each once"
+            )
         if isinstance(self.amplitudes, AmplitudeRange):
             k1 = parse_amplitude(self.amplitudes.start)[0]
             k2 = parse_amplitude(self.amplitudes.stop)[0]
