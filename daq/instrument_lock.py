@@ -49,7 +49,7 @@ class _InstrumentLock(RunFileLock):
     def _in_use(self, other: dict[str, Any]) -> str:
         return (
             f"{self.what} is in use by process {other.get('pid')} on {other.get('host', '?')} "
-            f"(since {other.get('since')}: {other.get('command', '')!s:.80}); wait for it to "
+            f"(since {other.get('since')}: {str(other.get('command', ''))[-160:]}); wait for it to "
             "end or stop it"
         )
 

@@ -83,6 +83,13 @@ def read_lock(path: str | Path) -> dict[str, Any] | None:
         return None
 
 
+def _command(info: dict[str, Any]) -> str:
+    """The holder's command line as it names the run: its end kept (it was cut at 80
+    characters, which dropped the run file's name)."""
+    text = str(info.get("command", ""))
+    return text if len(text) <= 160 else "..." + text[-157:]
+
+
 def in_use_by(path: str | Path) -> str | None:
     """The one-line refusal when a live process holds the lock of ``path``, else ``None``
     (for a check before anything is connected; the writer still takes the lock itself)."""
@@ -263,7 +270,7 @@ class RunFileLock:
         )
         return (
             f"{self.path} is being written by process {other.get('pid')} on {where} "
-            f"(since {other.get('since')}: {other.get('command', '')!s:.80}); {tail}"
+            f"(since {other.get('since')}: {_command(other)}); {tail}"
         )
 
     def release(self) -> None:

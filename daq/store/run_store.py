@@ -109,6 +109,11 @@ def check_output_path(path: Path, *, resume: bool = False) -> None:
         elif status == "complete":
             why = "is a complete run already"
         else:
+            from daq.store.lock import in_use_by
+
+            busy = in_use_by(path)  # a run writing it now: not one "left" to continue
+            if busy is not None:
+                raise StoreError(f"--out: {busy}; or write a new file (--out {_free_name(path)})")
             raise StoreError(
                 f"--out: {path} exists already (a run left {status}): continue it with "
                 f"--resume {path}, or write a new file (--out {_free_name(path)})"

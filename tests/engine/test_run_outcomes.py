@@ -386,3 +386,30 @@ def test_an_instrument_that_does_not_answer_at_connect_is_exit_1_not_a_refusal(
     monkeypatch.setattr(daq.connect, "connect_bench", no_driver)
     assert rp.main([str(proto_file), "--out", str(f), "--quiet"]) == 2
     assert "NI-DAQmx is not installed" in _last_err(capsys)
+
+
+def test_out_naming_a_file_another_run_writes_says_so_not_resume_it(tmp_path) -> None:
+    """'--out X' on a file another live process is writing said 'a run left running: continue
+    it with --resume', which would then be refused; and the lock's message cut the holder's
+    command at 80 characters, before the file's name (a second reader)."""
+    from daq.store import StoreError, check_output_path
+    from daq.store.lock import RunFileLock
+
+    from .helpers import chain_info
+
+    f = tmp_path / ("a_long_folder_name_" * 4) / "busy.h5"
+    f.parent.mkdir()
+    from protocols.runfile import RunFileWriter, ScanSpec
+
+    spec = ScanSpec("ltr", np.array([1.0]), "V", np.array([1], np.int32), np.arange(4) / 1e5,
+                    8920.0, 5.0, None)  # fmt: skip
+    w = RunFileWriter.create(f, backend="sim", chain=chain_info(), scans=[spec])
+    lock = RunFileLock(f).acquire()
+    try:
+        with pytest.raises(StoreError) as err:
+            check_output_path(f)
+        text = str(err.value)
+        assert "is being written by process" in text and "left running" not in text
+    finally:
+        lock.release()
+        w.close("aborted")
