@@ -295,8 +295,9 @@ class _SignalGate:
         self._watchdog.daemon = True
         self._watchdog.start()
         print(
-            f"run_protocol: {name}: aborting, safe state follows within {ABORT_BOUND_S:g} s "
-            "(Ctrl-C again to hurry)",
+            f"run_protocol: {name}: aborting, the run stops within {ABORT_BOUND_S:g} s and "
+            "the safe state follows (longer when an instrument does not answer; Ctrl-C again "
+            "to hurry)",
             file=sys.stderr,
             flush=True,
         )
