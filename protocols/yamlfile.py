@@ -400,7 +400,7 @@ def unknown_key_message(
             hint = f"; did you mean {missing[0]!r}?"
     if not hint:
         close = difflib.get_close_matches(key, sorted(written & set(allowed)), n=1, cutoff=0.6)
-        hint = f"; did you mean {close[0]!r}? (it is given too)" if close else ""
+        hint = f"; did you mean {close[0]!r}? (already set: give that name to change it)" if close else ""
     return f"unknown key {key!r}" + (hint or f" (allowed here: {', '.join(allowed)})")
 
 
