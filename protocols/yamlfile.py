@@ -400,7 +400,8 @@ def unknown_key_message(
             hint = f"; did you mean {missing[0]!r}?"
     if not hint:
         close = difflib.get_close_matches(key, sorted(written & set(allowed)), n=1, cutoff=0.6)
-        hint = f"; did you mean {close[0]!r}? (already set: give that name to change it)" if close else ""
+        if close:
+            hint = f"; did you mean {close[0]!r}? (already set: give that name to change it)"
     return f"unknown key {key!r}" + (hint or f" (allowed here: {', '.join(allowed)})")
 
 

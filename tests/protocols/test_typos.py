@@ -105,7 +105,8 @@ def test_typo_in_a_chain_setting_through_biafc_simulate(tmp_path: Path, capsys) 
     assert main([*argv, "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip()
     assert err.endswith(
-        "diamter: unknown key 'diamter'; did you mean 'diameter'? (it is set already, to change it)"
+        "diamter: unknown key 'diamter'; did you mean 'diameter'? "
+        "(already set: give that name to change it)"
     )
     assert len(err.splitlines()) == 1 and not out.exists()
 
