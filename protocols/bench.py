@@ -422,6 +422,7 @@ def load_bench(
     ``chain_set``; they become part of the bench text, so the run file records them."""
     p = Path(path) if path is not None else default_bench_path()
     doc = load_yaml(p)
+    _not_a_protocol(doc)
     if chain_set:
         import yaml
 
@@ -448,6 +449,19 @@ def _without_key(text: str, key: str) -> str:
     return "\n".join(out) + "\n"
 
 
+def _not_a_protocol(doc: YamlDoc) -> None:
+    """A protocol given where a bench file belongs, said as such (it read "unknown key
+    'directions'; did you mean 'direction_channel'?")."""
+    data = doc.data
+    if isinstance(data, dict) and {"directions", "burst"} <= set(data) and "generator" not in data:
+        raise doc.error(
+            (),
+            "this is a protocol (it has directions and burst), not a bench file: give it as "
+            "the protocol (run_protocol PROTOCOL.yaml --bench BENCH.yaml)",
+        )
+
+
 def parse_bench(text: str, source: str = "<bench>") -> BenchFile:
     doc = parse_yaml(text, source)
+    _not_a_protocol(doc)
     return BenchFile(validate(doc, BenchSpec), doc, None)

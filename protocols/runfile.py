@@ -640,7 +640,8 @@ def _check_open_format(path: Path, f: h5py.File) -> None:
     fmt = f.attrs.get("format")
     ver = f.attrs.get("format_version")
     if fmt != FORMAT:
-        raise RunFileError(f"{path} is not a biafc run file (format={fmt!r})")
+        what = "it is another HDF5 file" if fmt is None else f"its format attribute is {fmt!r}"
+        raise RunFileError(f"{path} is not a biafc run file ({what})")
     if int(ver) != FORMAT_VERSION:
         raise RunFileError(f"{path} has format_version {ver}; this software reads {FORMAT_VERSION}")
 

@@ -410,7 +410,7 @@ class Protocol(_Model):
     def _check(self) -> Protocol:
         dirs = self.direction_list
         if len(set(dirs)) != len(dirs) or not dirs:
-            raise ValueError("directions: list each of ltr, rtl at most once")
+            raise ValueError("directions: give ltr, rtl or both (each at most once)")
         for d in dirs:
             if d not in self.burst:
                 raise ValueError(f"burst: no burst for direction {d!r}")
@@ -484,7 +484,19 @@ class ProtocolFile:
         return self.doc.error(path, message)
 
 
+#: top-level keys of a bench file that a protocol never has (one given in its place)
+BENCH_KEYS = frozenset({"generator", "vibrometer", "stage", "daq", "amplifier"})
+
+
 def _validate(doc: YamlDoc) -> ProtocolFile:
+    data = doc.data
+    if isinstance(data, dict) and len(BENCH_KEYS & set(data)) >= 2 and "burst" not in data:
+        raise doc.error(
+            (),
+            "this is a bench file (it has "
+            + ", ".join(sorted(BENCH_KEYS & set(data)))
+            + "), not a protocol: give it as --bench BENCH.yaml",
+        )
     try:
         return ProtocolFile(validate(doc, Protocol), doc)
     except UnitError as exc:  # raised inside a derived property

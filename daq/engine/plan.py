@@ -122,7 +122,9 @@ def make_plan(pf: ProtocolFile, bf: BenchFile) -> Plan:
         if burst.duration_s > acq.duration:
             raise pf.error(
                 ("burst", d),
-                f"the burst lasts {burst.duration_s * 1e3:.4g} ms, longer than the record",
+                f"the burst lasts {burst.duration_s * 1e3:.4g} ms, longer than the record "
+                f"({acq.duration * 1e3:.4g} ms, acquisition.duration): give a shorter burst "
+                "(fewer cycles or a higher f_center) or a longer record",
             )
         _check_spectrum(pf, bf, d, burst)
     _check_transit(pf, bf, cyl)

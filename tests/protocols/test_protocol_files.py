@@ -95,8 +95,8 @@ def test_malformed_yaml(tmp_path: Path) -> None:
 def test_unknown_key_names_line_and_field(tmp_path: Path) -> None:
     msg = _err(GOOD.replace("  duration: 10 ms", "  duration: 10 ms\n  durration: 5 ms"), tmp_path)
     assert msg.endswith(
-        ":11: acquisition.durration: unknown key 'durration'; did you mean 'duration'? (it is "
-        "given too)"
+        ":11: acquisition.durration: unknown key 'durration'; did you mean 'duration'? "
+        "(already set: give that name to change it)"
     )
 
 
