@@ -595,6 +595,7 @@ class RunEngine:
                     self._scan_specs(time_s),
                     bench=self.bench_file,
                     accept_bench_change=self.accept_bench_change,
+                    seed=self.seed,
                 )
             except StoreError as exc:
                 raise RequestRefused(str(exc)) from None

@@ -300,11 +300,14 @@ def resume_run(
     *,
     bench: BenchFile | None = None,
     accept_bench_change: bool = False,
+    seed: int | None = None,
 ) -> RunFileWriter:
     """Re-open ``path`` to continue it with protocol ``pf`` on ``bench``; refused
     (:class:`StoreError`) when the protocol, the bench or the scan axes differ. With
     ``accept_bench_change`` a different bench is accepted and recorded in the file (root
-    attribute ``bench_overrides_json``: a list of {time, differences, bench_yaml})."""
+    attribute ``bench_overrides_json``: a list of {time, differences, bench_yaml}). ``seed``:
+    the simulated bench's seed of this resume, kept in its ``resumes_json`` entry (the root's
+    ``seed`` stays the start's)."""
     diffs = check_resume(
         path,
         pf,
@@ -324,7 +327,10 @@ def resume_run(
     prior = {k: v.decode() if isinstance(v, bytes) else str(v) for k, v in prior.items()}
     extra: dict[str, Any] = {}
     resumes = json.loads(prior["resumes_json"] or "[]")
-    resumes.append(provenance_attrs())
+    entry = provenance_attrs()
+    if seed is not None:
+        entry["seed"] = int(seed)
+    resumes.append(entry)
     extra["resumes_json"] = json.dumps(resumes)
     if bench is not None and diffs:
         old = json.loads(prior["bench_overrides_json"] or "[]")

@@ -118,6 +118,8 @@ def test_failed_points_are_exit_4_and_a_resume_remeasures_them(
     assert rp.main([str(proto_file), "--out", str(full), "--quiet", "--seed", "4"]) == 0
     a, b = read_run(full), read_run(part)
     assert b.status == "complete"
+    # the resume's seed is kept with the resume (the root's stays the start's)
+    assert json.loads(b.attrs["resumes_json"])[-1]["seed"] == 4
     for d in ("ltr", "rtl"):
         assert np.all(b.scans[d].done == PointState.DONE)
         np.testing.assert_array_equal(a.scans[d].velocity, b.scans[d].velocity)
