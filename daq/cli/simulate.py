@@ -168,7 +168,11 @@ def run(args: argparse.Namespace) -> int:
     if args.out is None and not args.explain:
         raise CliError("--out: required (or --explain to print the scene's plan only)")
     if args.out is not None and args.out.exists():
-        raise CliError(f"--out: {args.out} exists already")
+        raise CliError(
+            f"--out: {args.out} is a folder; give a run file name (e.g. {args.out}/run.h5)"
+            if args.out.is_dir()
+            else f"--out: {args.out} exists already"
+        )
     if args.out is not None:
         can_write(args.out, "--out")  # before the model runs, not after
     try:

@@ -112,7 +112,11 @@ def repair_run(path: str | Path) -> RepairReport:
 
     path = Path(path)
     if not path.is_file():
-        raise StoreError(f"{path} does not exist")
+        raise StoreError(
+            f"{path} is a folder; give a run file (RUN.h5)"
+            if path.is_dir()
+            else f"{path} does not exist"
+        )
     lock = RunFileLock(path)
     try:
         lock.acquire()
