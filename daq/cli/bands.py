@@ -81,6 +81,7 @@ def run(args: argparse.Namespace) -> int:
             )
     if args.csv:
         try:
+            args.csv.parent.mkdir(parents=True, exist_ok=True)  # checked writable above
             with args.csv.open("w", newline="", encoding="utf-8") as fh:
                 writer = csv.writer(fh)
                 writer.writerow(header)

@@ -94,3 +94,13 @@ def test_simulate_makes_the_folder_its_file_goes_into(
     args = ["simulate", "--direction", "ltr", "--amplitude", "1um", "--duration", "5ms"]
     assert main([*args, "--rate", "200kS/s", "--out", str(out)]) == 0, capsys.readouterr().err
     assert out.exists()
+
+
+def test_bands_csv_makes_its_folder(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``biafc bands --csv new/b.csv`` printed the table, then refused (the folder did not
+    exist, though the check had allowed it)."""
+    from daq.cli.biafc import main
+
+    out = tmp_path / "new" / "b.csv"
+    assert main(["bands", "--csv", str(out)]) == 0
+    assert out.read_text().startswith("cylinder")
