@@ -106,7 +106,8 @@ def _check(data, spec, result, figures: Path | None) -> dict[str, float | None]:
         f"DEM prediction of all {after.counts.get('ok', 0)} compared points (linear and "
         f"nonlinear), figure of merit: {before.figure_of_merit:.3f} from the start values, "
         f"{after.figure_of_merit:.3f} from the fit (time-domain {before.time_figure:.3f} -> "
-        f"{after.time_figure:.3f}, noise floor {after.noise_figure:.3f})"
+        f"{after.time_figure:.3f}, noise floor "
+        + (f"{after.noise_figure:.3f})" if math.isfinite(after.noise_figure) else "n/a)")
     )
     return {
         "figure_of_merit_before": f(before.figure_of_merit),
