@@ -63,12 +63,13 @@ EXPECTED = {
     "vibrometer_signal_lost": 4,
 }
 #: where the moment changes the honest outcome: a generator silent from the start is found
-#: when connecting (refused, nothing moved, no file); an SCPI error injected "at once" lands
+#: when connecting (exit 1: an instrument that does not answer, nothing switched on, no file;
+#: it was a refusal, exit 2, until 2026-11-28); an SCPI error injected "at once" lands
 #: on the driver's ``*CLS`` at connect, which clears a stale queue before the run (complete);
 #: a stage that loses its reference before the first move is homed as every run starts (the
 #: fault is absorbed, the run completes)
 EXPECTED_AT = {
-    ("generator_silent", "early"): 2,
+    ("generator_silent", "early"): 1,
     ("generator_scpi_error", "early"): 0,
     ("stage_lost_homing", "early"): 0,
 }
