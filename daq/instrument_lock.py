@@ -26,7 +26,7 @@ import threading
 from pathlib import Path
 from typing import Any
 
-from daq.store.lock import FileInUse, LockNotWritable, RunFileLock
+from daq.store.lock import FileInUse, LockNotWritable, RunFileLock, command_shown
 
 __all__ = ["InstrumentInUse", "InstrumentLocks", "lock_instruments"]
 
@@ -49,7 +49,7 @@ class _InstrumentLock(RunFileLock):
     def _in_use(self, other: dict[str, Any]) -> str:
         return (
             f"{self.what} is in use by process {other.get('pid')} on {other.get('host', '?')} "
-            f"(since {other.get('since')}: {str(other.get('command', ''))[-160:]}); wait for it to "
+            f"(since {other.get('since')}: {command_shown(other)}); wait for it to "
             "end or stop it"
         )
 

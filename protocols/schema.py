@@ -423,10 +423,15 @@ class Protocol(_Model):
                 "list each once"
             )
         if isinstance(self.amplitudes, AmplitudeRange):
-            k1 = parse_amplitude(self.amplitudes.start)[0]
-            k2 = parse_amplitude(self.amplitudes.stop)[0]
+            k1, v1 = parse_amplitude(self.amplitudes.start)
+            k2, v2 = parse_amplitude(self.amplitudes.stop)
             if k1 != k2:
                 raise ValueError("amplitudes: start and stop have different kinds of unit")
+            if self.amplitudes.count > 1 and math.isclose(v1, v2, rel_tol=1e-9):
+                raise ValueError(
+                    f"amplitudes: start and stop are the same ({self.amplitudes.start}): "
+                    f"{self.amplitudes.count} equal amplitudes; give one, or a range"
+                )
         return self
 
     # -- derived --------------------------------------------------------------------------

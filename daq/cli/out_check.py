@@ -13,8 +13,13 @@ __all__ = ["can_write", "can_write_folder"]
 
 
 def can_write(target: Path, flag: str) -> None:
-    """Refuse (one line) when ``target``, named by option ``flag``, cannot be written."""
-    problem = cannot_write(Path(target), flag)
+    """Refuse (one line) when the file ``target``, named by option ``flag``, cannot be
+    written: a folder of that name included (it passed, and the command failed after its
+    work: ``bands --csv``, ``calibrate --out``, ``accuracy --plot``)."""
+    target = Path(target)
+    if target.is_dir():
+        raise CliError(f"{flag}: {target} is a folder; give a file name")
+    problem = cannot_write(target, flag)
     if problem is not None:
         raise CliError(problem)
 
@@ -25,4 +30,6 @@ def can_write_folder(target: Path, flag: str) -> None:
     target = Path(target)
     if target.exists() and not target.is_dir():
         raise CliError(f"{flag}: {target} is a file; give a folder to write into")
-    can_write(target, flag)
+    problem = cannot_write(target, flag)
+    if problem is not None:
+        raise CliError(problem)

@@ -159,8 +159,11 @@ class MainWindow(QMainWindow):
             except RuntimeError:  # the window is gone: nothing to show it in
                 pass
 
+        report.biafc_window = True  # type: ignore[attr-defined]
         self._report = report
-        self._previous_reporter = set_compile_reporter(report)
+        previous = set_compile_reporter(report)
+        # another window's is not kept: it may be closed when this one closes
+        self._previous_reporter = None if getattr(previous, "biafc_window", False) else previous
         self._redraw_timer = QTimer(self)
         self._redraw_timer.setInterval(REDRAW_MS)
         self._pace = RedrawPace()
@@ -1059,10 +1062,22 @@ class MainWindow(QMainWindow):
         if kernel_cache._REPORTER is self._report:  # not another window's, opened after this
             kernel_cache.set_compile_reporter(self._previous_reporter)
         if self.instruments is not None:
-            try:
-                self.instruments.close()
-            except Exception:
-                pass
+            # after a Safe state (or a read) still under way: closing the transports under it
+            # cut it off ("transport closed, cannot send 'OUTP1?'", a second reader)
+            if self._instrument_lock.acquire(timeout=CLOSE_WAIT_S):
+                try:
+                    self.instruments.close()
+                except Exception:
+                    pass
+                finally:
+                    self._instrument_lock.release()
+            else:
+                self.log(
+                    f"the Safe state did not end within {CLOSE_WAIT_S:g} s: it is not "
+                    "confirmed; switch the generator's outputs off by hand",
+                    "error",
+                )
+                self.exit_status = 3
             self.instruments = None
         event.accept()
 

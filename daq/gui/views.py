@@ -199,6 +199,14 @@ class SpatialMapView(pg.PlotWidget):
             self.failed_marks.setData(  # every cylinder of this amplitude failed: still shown
                 np.full(self.n_failed, x0), scan.cylinders[failed].astype(float)
             )
+            amp = scan.amplitudes[ai] * (1e6 if scan.amplitude_units == "m" else 1)
+            unit = "um" if scan.amplitude_units == "m" else "Vpp"
+            self.setTitle(  # not the previous amplitude's title
+                f"spatial-frequency map: {scan.direction}, {amp:.3g} {unit} (0/"
+                f"{len(scan.cylinders)} cylinders"
+                + (f", {self.n_failed} failed: red x" if self.n_failed else "")
+                + ")"
+            )
             return
         lo, hi = np.percentile(img[finite], [5, 100])
         # not measured (or failed): NaN, drawn transparent, outside the colour scale; it was

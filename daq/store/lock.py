@@ -83,7 +83,7 @@ def read_lock(path: str | Path) -> dict[str, Any] | None:
         return None
 
 
-def _command(info: dict[str, Any]) -> str:
+def command_shown(info: dict[str, Any]) -> str:
     """The holder's command line as it names the run: its end kept (it was cut at 80
     characters, which dropped the run file's name)."""
     text = str(info.get("command", ""))
@@ -270,7 +270,7 @@ class RunFileLock:
         )
         return (
             f"{self.path} is being written by process {other.get('pid')} on {where} "
-            f"(since {other.get('since')}: {_command(other)}); {tail}"
+            f"(since {other.get('since')}: {command_shown(other)}); {tail}"
         )
 
     def release(self) -> None:

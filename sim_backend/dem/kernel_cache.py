@@ -159,7 +159,10 @@ def expected_cache_folder() -> Path:
     if env:
         return Path(env)
     wanted = kernel_cache_dir()
-    return wanted if _can_write(wanted) else Path(__file__).resolve().parent / "__pycache__"
+    beside = Path(__file__).resolve().parent / "__pycache__"
+    if _can_write(wanted) or not _can_write(beside):  # neither: numba's user-wide folder,
+        return wanted  # not guessed here (the notice may then say a compile once too often)
+    return beside
 
 
 def kernel_cached_on_disk() -> bool:

@@ -192,3 +192,9 @@ def test_where_the_kernel_is_looked_for_follows_numbas_fallback(
     assert kernel_cache.expected_cache_folder() == beside
     monkeypatch.setenv("BIAFC_CACHE_DIR", str(tmp_path / "new" / "cache"))  # can be made
     assert kernel_cache.expected_cache_folder() == tmp_path / "new" / "cache" / "numba"
+    # and a kernel numba keeps there counts as on disk (every run announced a compile)
+    there = tmp_path / "there"
+    (there / "sim_backend" / "dem").mkdir(parents=True)
+    (there / "sim_backend" / "dem" / "kernel.run_chunks-405.py311.nbi").write_bytes(b"")
+    monkeypatch.setattr(kernel_cache, "expected_cache_folder", lambda: there)
+    assert kernel_cache.kernel_cached_on_disk()  # looked for where numba keeps it

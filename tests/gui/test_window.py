@@ -709,3 +709,33 @@ def test_what_the_second_reader_found_in_the_window_fixes(qtbot: Any, tmp_path: 
     bad._redraw()
     assert bad.live.n_failed == 6 and len(bad.views.sweep.failed_marks.data) == 6
     assert "6 failed" in bad.views.trace.p_vel.titleLabel.text
+
+
+def test_closing_the_window_waits_for_a_safe_state_under_way(
+    qtbot: Any, window: MainWindow
+) -> None:
+    """Closing closed the transports under a Safe state still working on them: it ended with
+    'transport closed, cannot send OUTP1?' (a second reader). The close waits for it."""
+    import threading
+
+    connect(qtbot, window)
+    inst = window.instruments
+    order: list[str] = []
+    real_safe, real_close = inst.stage.safe_state, inst.close
+
+    def slow_safe() -> None:
+        time.sleep(1.0)
+        order.append("safe state done")
+        real_safe()
+
+    def close() -> None:
+        order.append("closed")
+        real_close()
+
+    inst.stage.safe_state = slow_safe
+    inst.close = close
+    window.bench_panel.safe_button.click()
+    qtbot.wait(100)
+    assert threading.active_count() > 1
+    window.close()
+    assert order[:2] == ["safe state done", "closed"], order  # (closing runs its own after)
