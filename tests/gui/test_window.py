@@ -551,18 +551,9 @@ def test_the_unsafe_mark_goes_once_the_safe_state_is_confirmed_and_the_status_is
     """The bench panel's 'UNSAFE' of a run stayed up after a Safe state had confirmed every
     output off (until Reconnect); and the window's process exited 0 after an unsafe run."""
 
-    def silent(bf: Any, seed: int | None) -> Any:
-        return connect_bench(
-            bf, seed=seed, faults={"generator_silent": True, "after_acquisitions": 3}
-        )
-
-    win = MainWindow(None, SMOKE, assembler=silent)
-    qtbot.addWidget(win)
-    win.show()
-    win.run_panel.out_edit.setText(str(tmp_path / "u.h5"))
-    connect(qtbot, win)
-    with qtbot.waitSignal(win.run_finished, timeout=60_000):
-        win.run_panel.start_button.click()
+    win = _run_with_faults(
+        qtbot, {"generator_silent": True, "after_acquisitions": 3}, tmp_path / "u.h5"
+    )
     assert win.bench_panel.status_label.text().startswith("✗ UNSAFE")
     assert win.exit_status == 3  # as run_protocol's
     win.instruments.world.faults.clear()  # the generator answers again
@@ -620,16 +611,8 @@ def test_failed_points_are_marked_in_the_live_views(
     measured yet, and the colour of a missing cell was the scale's lowest, that of a quiet
     measured one (a second reader: 4 of 6 points failed, none visible)."""
 
-    def nan_reads(bf: Any, seed: int | None) -> Any:
-        return connect_bench(bf, seed=seed, faults={"digitiser_nan": True, "after_acquisitions": 4})
-
-    win = MainWindow(None, SMOKE, assembler=nan_reads)
-    qtbot.addWidget(win)
-    win.show()
-    win.run_panel.out_edit.setText(str(tmp_path / "f.h5"))
-    connect(qtbot, win)
-    with qtbot.waitSignal(win.run_finished, timeout=60_000):
-        win.run_panel.start_button.click()
+    nan_reads = {"digitiser_nan": True, "after_acquisitions": 4}
+    win = _run_with_faults(qtbot, nan_reads, tmp_path / "f.h5")
     win._redraw()
     n_failed = int(np.sum(read_run(tmp_path / "f.h5").scans["ltr"].done == PointState.FAILED))
     assert n_failed >= 3 and win.live.n_failed == n_failed
@@ -697,15 +680,7 @@ def test_what_the_second_reader_found_in_the_window_fixes(qtbot: Any, tmp_path: 
     assert kernel_cache._REPORTER is win._report
     win.close()
 
-    def all_nan(bf: Any, seed: int | None) -> Any:
-        return connect_bench(bf, seed=seed, faults={"digitiser_nan": True})
-
-    bad = MainWindow(None, SMOKE, assembler=all_nan)
-    qtbot.addWidget(bad)
-    bad.run_panel.out_edit.setText(str(tmp_path / "all_failed.h5"))
-    connect(qtbot, bad)
-    with qtbot.waitSignal(bad.run_finished, timeout=60_000):
-        bad.run_panel.start_button.click()
+    bad = _run_with_faults(qtbot, {"digitiser_nan": True}, tmp_path / "all_failed.h5")
     bad._redraw()
     assert bad.live.n_failed == 6 and len(bad.views.sweep.failed_marks.data) == 6
     assert "6 failed" in bad.views.trace.p_vel.titleLabel.text
@@ -739,3 +714,19 @@ def test_closing_the_window_waits_for_a_safe_state_under_way(
     assert threading.active_count() > 1
     window.close()
     assert order[:2] == ["safe state done", "closed"], order  # (closing runs its own after)
+
+
+def _run_with_faults(qtbot: Any, faults: dict[str, Any], out: Path) -> MainWindow:
+    """A window on the simulated bench with ``faults``, its smoke run into ``out`` ended."""
+
+    def faulty(bf: Any, seed: int | None) -> Any:
+        return connect_bench(bf, seed=seed, faults=faults)
+
+    win = MainWindow(None, SMOKE, assembler=faulty)
+    qtbot.addWidget(win)
+    win.show()
+    win.run_panel.out_edit.setText(str(out))
+    connect(qtbot, win)
+    with qtbot.waitSignal(win.run_finished, timeout=60_000):
+        win.run_panel.start_button.click()
+    return win
