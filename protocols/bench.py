@@ -321,6 +321,17 @@ class BenchSpec(_Model):
     def _some_positions(cls, v: Any) -> Any:
         if isinstance(v, list) and not 1 <= len(v) <= 1000:
             raise ValueError(f"{len(v)} positions; give 1 to 1000")
+        if isinstance(v, list) and len(v) > 1:  # as a pitch of 0 is refused
+            x = np.asarray(v, dtype=np.float64)
+            order = np.argsort(x, kind="stable")
+            same = np.abs(np.diff(x[order])) < 1e-9  # neighbours once sorted
+            if same.any():
+                k = int(np.argmax(same))
+                j, i = sorted((int(order[k]), int(order[k + 1])))
+                raise ValueError(
+                    f"cylinders {j + 1} and {i + 1} are both at {x[i] * 1e3:.4g} mm; give each "
+                    "cylinder its own position"
+                )
         return v
 
     @model_validator(mode="after")
