@@ -92,7 +92,8 @@ def make_plan(pf: ProtocolFile, bf: BenchFile) -> Plan:
     vpp = np.array([bench.generator_Vpp(a, kind) for a in amps])
     _check_amplitudes(pf, bf, vpp)
     n = bench.n_cylinders
-    _check_model_cylinders(bf)
+    chain = _model_chain(bf)  # once: the window plans on every pause in typing
+    _check_model_cylinders(bf, chain)
     cyl = proto.cylinder_numbers(n)
     bad = [int(c) for c in cyl if not 1 <= c <= n]
     if bad:
@@ -127,7 +128,7 @@ def make_plan(pf: ProtocolFile, bf: BenchFile) -> Plan:
                 "(fewer cycles or a higher f_center) or a longer record",
             )
         _check_spectrum(pf, bf, d, burst)
-    _check_transit(pf, bf, cyl)
+    _check_transit(pf, bf, cyl, chain)
     _check_memory(pf, len(proto.direction_list) * len(amps) * len(cyl))
     axes = {
         "direction": list(enumerate(proto.direction_list)),
@@ -289,16 +290,21 @@ def _generator_limits(bf: BenchFile) -> Any:
     )
 
 
-def _check_model_cylinders(bf: BenchFile) -> None:
+def _model_chain(bf: BenchFile) -> Any:
+    """The bench's chain as the model builds it (``sim_backend.dem.Chain``)."""
+    from daq.chain_info import chain_spec
+    from sim_backend import dem
+
+    return dem.build_chain(chain_spec(bf))
+
+
+def _check_model_cylinders(bf: BenchFile, chain: Any) -> None:
     """A simulated bench places as many cylinders as its chain has: more positions than the
     model's cylinders passed the dry run and failed the run at the first extra one (an
     IndexError); fewer left the model's far end unmeasurable."""
     if bf.bench.simulation is None:
         return
-    from daq.chain_info import chain_spec
-    from sim_backend import dem
-
-    n_model = dem.build_chain(chain_spec(bf)).n
+    n_model = chain.n
     if bf.bench.n_cylinders != n_model:
         field = "chain" if bf.bench.chain else "cylinder_positions"
         raise bf.doc.error(
@@ -308,16 +314,14 @@ def _check_model_cylinders(bf: BenchFile) -> None:
         )
 
 
-def _check_transit(pf: ProtocolFile, bf: BenchFile, cylinders: NDArray[np.int32]) -> None:
+def _check_transit(
+    pf: ProtocolFile, bf: BenchFile, cylinders: NDArray[np.int32], chain: Any
+) -> None:
     """The record holds each burst and its transit to the farthest cylinder measured: at
     least one contact's crossing time sqrt(m0 / K) per contact, ``m0`` the lightest
     cylinder's rigid (non-resonating) mass and ``K`` the linearised contact stiffness of the
     bench's chain: no wave crosses faster, so a shorter record cannot hold its arrival."""
-    from daq.chain_info import chain_spec
-    from sim_backend import dem
-
     proto = pf.protocol
-    chain = dem.build_chain(chain_spec(bf))
     if not chain.K_lin > 0:  # preload 0 N: no linear wave speed, no bound to check against
         return
     per_contact = math.sqrt(float(np.min(chain.m0_kg)) / float(chain.K_lin))
