@@ -66,7 +66,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     sub_parser = argparse.ArgumentParser(prog=f"biafc {name}", description=SUBCOMMANDS[name][1])
     module.add_arguments(sub_parser)
-    args = sub_parser.parse_args(argv[1:])
+    args = sub_parser.parse_args(_negative_values_joined(argv[1:]))
     try:
         if name == "gui":  # the window closes on them itself (daq.gui.stop_signals)
             return int(module.run(args) or 0)
@@ -84,6 +84,30 @@ def main(argv: Sequence[str] | None = None) -> int:
     except BrokenPipeError:  # the reader stopped early (biafc bands | head): not a failure
         _quiet_stdout()
         return 0
+
+
+def _negative_values_joined(argv: list[str]) -> list[str]:
+    """``--amplitude -2um`` as ``--amplitude=-2um``: argparse takes a value that starts with a
+    minus sign and is not a bare number for an option, and said "expected one argument"; the
+    option's own check then says what is wrong with the value."""
+    out: list[str] = []
+    i = 0
+    while i < len(argv):
+        tok = argv[i]
+        nxt = argv[i + 1] if i + 1 < len(argv) else ""
+        if (
+            tok.startswith("--")
+            and "=" not in tok
+            and len(nxt) > 1
+            and nxt[0] == "-"
+            and (nxt[1].isdigit() or nxt[1] == ".")
+        ):
+            out.append(f"{tok}={nxt}")
+            i += 2
+            continue
+        out.append(tok)
+        i += 1
+    return out
 
 
 def _say(line: str) -> None:
