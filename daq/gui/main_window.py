@@ -1079,6 +1079,11 @@ class MainWindow(QMainWindow):
                 )
                 self.exit_status = 3
             self.instruments = None
+        # let the workers that just finished (the read after the run, now unblocked by the
+        # lock) emit their result while Qt is still alive: one emitting during the
+        # interpreter's exit crashed the process (exit -11 after a stop signal mid-run)
+        for call in list(BackgroundCall._alive):
+            call.worker.join(timeout=5.0)
         event.accept()
 
 
