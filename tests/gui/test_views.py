@@ -130,3 +130,15 @@ def test_the_live_map_leaves_cylinders_not_scanned_empty(qtbot: Any) -> None:
     grid = views.spatial.image.image  # [rows = cylinders 1..8, F]
     measured = np.isfinite(grid).any(axis=1)
     assert list(np.nonzero(measured)[0] + 1) == [1, 8]
+
+
+def test_a_failed_point_measured_on_resume_is_no_longer_counted(qtbot: Any) -> None:
+    live = LiveData()
+    live.scans["ltr"] = ScanView.empty(
+        "ltr", 8.92e3, np.array([2e-6]), "m", np.array([1, 2], np.int32), 30_000, 1e6
+    )
+    live.add_failed({**_big_point(), "reason": "NaN"})
+    live.add_failed({**_big_point(), "cylinder_index": 1, "cylinder": 2, "reason": "NaN"})
+    assert live.n_failed == 2
+    live.add_point(_big_point())  # the resume measured cylinder 1 after all
+    assert live.n_failed == 1

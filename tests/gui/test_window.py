@@ -112,6 +112,8 @@ def test_pause_resume_abort_buttons(qtbot: Any, tmp_path: Path) -> None:
     assert win.live.n_points == n_paused, "points measured while paused"
     rp.resume_button.click()
     wait_until(qtbot, lambda: rp.pause_button.isEnabled())  # running again
+    win._on_events()
+    assert not win.run_panel.where_label.text().startswith("paused")  # it stayed "paused"
     assert win.engine.state.value == "running" and n_paused < 6
     with qtbot.waitSignal(win.run_finished, timeout=60_000) as blocker:
         rp.abort_button.click()
@@ -730,3 +732,16 @@ def _run_with_faults(qtbot: Any, faults: dict[str, Any], out: Path) -> MainWindo
     with qtbot.waitSignal(win.run_finished, timeout=60_000):
         win.run_panel.start_button.click()
     return win
+
+
+def test_a_stop_signal_keeps_an_unsafe_status_and_gives_its_own_otherwise(
+    qtbot: Any, tmp_path: Path
+) -> None:
+    import signal
+
+    for before, after in ((3, 3), (4, 128 + signal.SIGTERM)):
+        win = MainWindow(None, SMOKE, assembler=make_assembler())
+        qtbot.addWidget(win)
+        win.exit_status = before  # the last run's (3 unsafe, 4 points failed)
+        win.stop_signal(signal.SIGTERM)
+        assert win.exit_status == after, (before, win.exit_status)
