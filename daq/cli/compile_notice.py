@@ -11,7 +11,7 @@ import sys
 from pathlib import Path
 from typing import TextIO
 
-__all__ = ["CompileNotice", "install"]
+__all__ = ["CompileNotice", "doing", "install", "ready_line", "start_line"]
 
 
 class CompileNotice:
@@ -22,18 +22,31 @@ class CompileNotice:
         self.tty = stream.isatty()
 
     def __call__(self, phase: str, elapsed_s: float, folder: Path, cold: bool) -> None:
-        what = "compiling" if cold else "loading or recompiling"
         if phase == "start":
-            self.stream.write(
-                f"{what} the DEM kernel for this machine: once per installation, usually "
-                f"5-20 s; kept in {folder} (`biafc warmup` does it ahead of time)\n"
-            )
+            self.stream.write(start_line(folder, cold) + "\n")
         elif phase == "tick" and self.tty:
-            self.stream.write(f"\r  {what} the DEM kernel ... {elapsed_s:4.0f} s")
+            self.stream.write(f"\r  {doing(cold)} the DEM kernel ... {elapsed_s:4.0f} s")
         elif phase == "done":
             lead = "\r" if self.tty else ""
-            self.stream.write(f"{lead}  DEM kernel ready after {elapsed_s:.1f} s          \n")
+            self.stream.write(f"{lead}  {ready_line(elapsed_s)}          \n")
         self.stream.flush()
+
+
+def doing(cold: bool) -> str:
+    """What happens to the kernel: "compiling" when nothing was on disk."""
+    return "compiling" if cold else "loading or recompiling"
+
+
+def start_line(folder: Path | str, cold: bool) -> str:
+    """The notice's first line (the command line's and the bench window's)."""
+    return (
+        f"{doing(cold)} the DEM kernel for this machine: once per installation, usually "
+        f"5-20 s; kept in {folder} (`biafc warmup` does it ahead of time)"
+    )
+
+
+def ready_line(elapsed_s: float) -> str:
+    return f"DEM kernel ready after {elapsed_s:.1f} s"
 
 
 def install(stream: TextIO | None = None) -> None:

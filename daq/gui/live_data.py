@@ -112,8 +112,6 @@ class LiveData:
     bursts: dict[str, Burst] = field(default_factory=dict)
     last: Trace | None = None
     n_points: int = 0
-    #: the last point that failed (direction, amplitude, units, cylinder, reason), or None
-    last_failed: tuple[str, float, str, int, str] | None = None
 
     @classmethod
     def for_plan(cls, plan: Any, protocol: Any, chain: ChainInfo | None) -> LiveData:
@@ -180,17 +178,9 @@ class LiveData:
 
     def add_failed(self, data: dict[str, Any]) -> None:
         """Take a ``point_failed`` event's data: the point is marked failed in its maps."""
-        d = str(data["direction"])
-        scan = self.scans.get(d)
+        scan = self.scans.get(str(data["direction"]))
         if scan is not None:
             scan.mark_failed(int(data["amplitude_index"]), int(data["cylinder_index"]))
-        self.last_failed = (
-            d,
-            float(data["amplitude"]),
-            str(data.get("amplitude_units", "")),
-            int(data["cylinder"]),
-            str(data.get("reason", "")),
-        )
 
     @classmethod
     def from_run(cls, run: RunData) -> LiveData:

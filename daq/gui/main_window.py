@@ -123,10 +123,6 @@ class MainWindow(QMainWindow):
         self.run_path: Path | None = None
         self._dirty = False
         self._busy_connect = False
-        #: the instruments a Safe state works on now; a disconnect meanwhile leaves their closing
-        #: to it (two threads on one transport could cross their replies)
-        self._safe_busy: Any = None
-        self._close_after_safe = False
         self._pending_start: tuple[Path | None] | None = None
         #: a resumed run's file whose points are being read before it starts (None: none)
         self._prefilling: Path | None = None
@@ -369,9 +365,7 @@ class MainWindow(QMainWindow):
     def _disconnect(self) -> None:
         inst, self.instruments = self.instruments, None
         self.chain = None
-        if inst is not None and inst is self._safe_busy:
-            self._close_after_safe = True  # the Safe state's end closes them
-        elif inst is not None:
+        if inst is not None:  # under the lock: after a Safe state or a read still under way
             BackgroundCall(self._locked(inst.close), lambda r, e: None, name="biafc-gui-close")
         self.bench_panel.set_connected(False)
 
@@ -461,7 +455,6 @@ class MainWindow(QMainWindow):
             return
         channels = sorted(set(self.bench_file.bench.direction_channel.values()))
         self.bench_panel.safe_button.setEnabled(False)
-        self._safe_busy, self._close_after_safe = inst, False
         self._hold_instruments("the Safe state")
 
         def work() -> dict[str, Any]:
@@ -478,11 +471,7 @@ class MainWindow(QMainWindow):
             return snap
 
         def done(snap: Any, err: BaseException | None) -> None:
-            self._safe_busy = None
             self._release_instruments("the Safe state")
-            if self._close_after_safe:  # disconnected meanwhile: closed now, after it
-                self._close_after_safe = False
-                BackgroundCall(self._locked(inst.close), lambda r, e: None, name="biafc-gui-close")
             if inst is self.instruments:
                 self.bench_panel.safe_button.setEnabled(True)
             if err is not None:
@@ -786,27 +775,21 @@ class MainWindow(QMainWindow):
                 self._dirty = True
             elif k == EventKind.POINT_FAILED:  # marked in the maps, not left as "not yet"
                 try:
-                    self.live.add_failed({**d, "reason": ev.message})
+                    self.live.add_failed(d)
                 except Exception as exc:
                     self.log(f"live view: {exc}", "warning")
                 self._dirty = True
             elif k == EventKind.PROGRESS:
                 self.run_panel.show_progress(d)
                 if self.engine is not None and self.engine.state.value == "paused":
-                    self.run_panel.where_label.setText(  # the point in flight, then paused
-                        "paused (after the point in flight): Resume to go on"
-                    )
+                    self.run_panel.where_label.setText(PAUSED_LINE)  # the point in flight
             # the engine records its own events in the run's log and file: shown here only
             elif k == EventKind.STATE_CHANGED:
                 self.run_panel.set_state(str(d["state"]))
                 self.log(f"run {d['state']}", record=False)
                 if d["state"] == "paused":  # the line kept the last ETA, as if running
-                    self.run_panel.where_label.setText(
-                        "paused (after the point in flight): Resume to go on"
-                    )
-                elif d["state"] == "running" and self.run_panel.where_label.text().startswith(
-                    "paused"
-                ):
+                    self.run_panel.where_label.setText(PAUSED_LINE)
+                elif d["state"] == "running" and self.run_panel.where_label.text() == PAUSED_LINE:
                     self.run_panel.where_label.setText("running again")
             elif k == EventKind.RUN_STARTED:
                 self.log(
@@ -867,19 +850,18 @@ class MainWindow(QMainWindow):
         self.run_finished.emit(status)
 
     def _show_compile(self, phase: str, elapsed_s: float, folder: str, cold: bool) -> None:
-        what = "compiling" if cold else "loading or recompiling"
+        """The command line's compile notice, in the log and the run panel's line."""
+        from daq.cli.compile_notice import doing, ready_line, start_line
+
         if phase == "start":
-            self.log(
-                f"{what} the DEM kernel for this machine: once per installation, usually 5-20 s; "
-                f"kept in {folder} (`biafc warmup` does it ahead of time)"
-            )
+            self.log(start_line(folder, cold))
         if phase in ("start", "tick"):
             self.run_panel.where_label.setText(
-                f"{what} the DEM kernel (once per installation) ... {elapsed_s:.0f} s"
+                f"{doing(cold)} the DEM kernel (once per installation) ... {elapsed_s:.0f} s"
             )
         elif phase == "done":
-            self.log(f"DEM kernel ready after {elapsed_s:.1f} s")
-            self.run_panel.where_label.setText(f"DEM kernel ready after {elapsed_s:.1f} s")
+            self.log(ready_line(elapsed_s))
+            self.run_panel.where_label.setText(ready_line(elapsed_s))
 
     def _clear_unsafe_mark(self) -> None:
         """Take down the bench panel's "UNSAFE" of an earlier run (once a Safe state has
@@ -1086,6 +1068,9 @@ class MainWindow(QMainWindow):
             call.worker.join(timeout=5.0)
         event.accept()
 
+
+#: the run panel's line while a run is paused
+PAUSED_LINE = "paused (after the point in flight): Resume to go on"
 
 #: how long closing the window waits for an aborted run's safe state and file (s)
 CLOSE_WAIT_S = 60.0

@@ -234,6 +234,8 @@ class RunPanel(QGroupBox):
         self.resume_button.clicked.connect(self.resume_requested)
         self.abort_button.clicked.connect(self.abort_requested)
         self.resume_file_button.clicked.connect(self.resume_file_requested)
+        self._blocked = False  # another task works on the instruments (set_blocked)
+        self._startable = True  # the editor's protocol is valid (set_startable)
         self.set_state("idle")
 
     def set_blocked(self, blocked: bool) -> None:
@@ -252,8 +254,8 @@ class RunPanel(QGroupBox):
         """Enable the buttons that make sense in engine state ``state``."""
         self._state = state
         active = state in ("running", "paused", "starting")
-        free = not active and not getattr(self, "_blocked", False)
-        self.start_button.setEnabled(free and getattr(self, "_startable", True))
+        free = not active and not self._blocked
+        self.start_button.setEnabled(free and self._startable)
         self.resume_file_button.setEnabled(free)
         self.pause_button.setEnabled(state == "running")
         self.resume_button.setEnabled(state == "paused")

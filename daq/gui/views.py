@@ -33,6 +33,21 @@ _INPUT_PEN = pg.mkPen((220, 0, 0), width=2, style=pg.QtCore.Qt.PenStyle.DashLine
 _EDGE_PEN = pg.mkPen((255, 140, 0), width=2)
 #: failed points on the maps (a cross: the input line is red too, but a line)
 _FAILED_RGB = (255, 60, 60)
+
+
+def _failed_marks(plot: pg.PlotWidget) -> pg.ScatterPlotItem:
+    """The red crosses of the failed points on ``plot``, above its image."""
+    marks = pg.ScatterPlotItem(symbol="x", size=14, pen=pg.mkPen(_FAILED_RGB, width=3), brush=None)
+    marks.setZValue(11)
+    plot.addItem(marks)
+    return marks
+
+
+def _amp_text(amplitude: float, units: str) -> str:
+    """A drive amplitude as the views show it: um for a displacement (m), else Vpp."""
+    return f"{amplitude * 1e6:.3g} um" if units == "m" else f"{amplitude:.3g} Vpp"
+
+
 _MODEL_PEN = pg.mkPen((0, 0, 0), width=1.5, style=pg.QtCore.Qt.PenStyle.DashLine)
 
 
@@ -127,11 +142,9 @@ class SpectrumView(pg.PlotWidget):
             b = _resonance_band(onset, cutoff)
             self.band.setRegion((onset[i, b] / 1e3, cutoff[i, b] / 1e3))
             self.band.show()
-        amp = f"{tr.amplitude * (1e6 if tr.amplitude_units == 'm' else 1):.3g}"
-        unit = "um" if tr.amplitude_units == "m" else "Vpp"
         self.setTitle(
-            f"spectrum: {tr.direction}, amplitude {amp} {unit}, cylinder {tr.cylinder} "
-            "(band shaded)"
+            f"spectrum: {tr.direction}, amplitude {_amp_text(tr.amplitude, tr.amplitude_units)}"
+            f", cylinder {tr.cylinder} (band shaded)"
         )
         self.n_drawn = int(np.count_nonzero(np.isfinite(mag)))
 
@@ -167,11 +180,7 @@ class SpatialMapView(pg.PlotWidget):
         self.model_peaks.setZValue(10)
         self.addItem(self.model_peaks)
         self.model_peaks.hide()
-        self.failed_marks = pg.ScatterPlotItem(
-            symbol="x", size=14, pen=pg.mkPen(_FAILED_RGB, width=3), brush=None
-        )
-        self.failed_marks.setZValue(11)
-        self.addItem(self.failed_marks)
+        self.failed_marks = _failed_marks(self)
         self.n_rows = 0
         self.n_failed = 0
 
@@ -199,14 +208,7 @@ class SpatialMapView(pg.PlotWidget):
             self.failed_marks.setData(  # every cylinder of this amplitude failed: still shown
                 np.full(self.n_failed, x0), scan.cylinders[failed].astype(float)
             )
-            amp = scan.amplitudes[ai] * (1e6 if scan.amplitude_units == "m" else 1)
-            unit = "um" if scan.amplitude_units == "m" else "Vpp"
-            self.setTitle(  # not the previous amplitude's title
-                f"spatial-frequency map: {scan.direction}, {amp:.3g} {unit} (0/"
-                f"{len(scan.cylinders)} cylinders"
-                + (f", {self.n_failed} failed: red x" if self.n_failed else "")
-                + ")"
-            )
+            self._title(scan, ai)  # not the previous amplitude's title
             return
         lo, hi = np.percentile(img[finite], [5, 100])
         # not measured (or failed): NaN, drawn transparent, outside the colour scale; it was
@@ -234,20 +236,22 @@ class SpatialMapView(pg.PlotWidget):
             n = np.arange(1, onset.shape[0] + 1)
             self.onset_curve.setData(onset[:, b] / 1e3, n)
             self.cutoff_curve.setData(cutoff[:, b] / 1e3, n)
-        amp = scan.amplitudes[ai] * (1e6 if scan.amplitude_units == "m" else 1)
-        unit = "um" if scan.amplitude_units == "m" else "Vpp"
         x_mark = f_khz[0] + 0.03 * (f_khz[-1] - f_khz[0])
         self.failed_marks.setData(
             np.full(self.n_failed, x_mark), scan.cylinders[failed].astype(float)
         )
-        self.setTitle(
-            f"spatial-frequency map: {scan.direction}, {amp:.3g} {unit} "
-            f"({self.n_rows}/{len(cyl)} cylinders"
-            + (f", {self.n_failed} failed: red x" if self.n_failed else "")
-            + ")"
-        )
+        self._title(scan, ai)
         self.setXRange(f_khz[0], f_khz[-1], padding=0)
         self.setYRange(0.5, n_rows + 0.5, padding=0)
+
+    def _title(self, scan: ScanView, ai: int) -> None:
+        """Direction, amplitude ``ai``, cylinders measured and failed."""
+        failed = f", {self.n_failed} failed: red x" if self.n_failed else ""
+        self.setTitle(
+            f"spatial-frequency map: {scan.direction}, "
+            f"{_amp_text(float(scan.amplitudes[ai]), scan.amplitude_units)} "
+            f"({self.n_rows}/{len(scan.cylinders)} cylinders{failed})"
+        )
 
 
 class BandView(pg.PlotWidget):
@@ -316,11 +320,7 @@ class SweepView(pg.PlotWidget):
         )
         self.colorbar.setImageItem(self.image, insert_in=self.getPlotItem())
         self.setTitle("amplitude sweep: |V(f_in)| per cylinder (one amplitude per row)")
-        self.failed_marks = pg.ScatterPlotItem(
-            symbol="x", size=14, pen=pg.mkPen(_FAILED_RGB, width=3), brush=None
-        )
-        self.failed_marks.setZValue(11)
-        self.addItem(self.failed_marks)
+        self.failed_marks = _failed_marks(self)
         self.n_cells = 0
         self.n_failed = 0
 
@@ -361,10 +361,6 @@ class SweepView(pg.PlotWidget):
 
 #: the maps' choice that shows the point being measured
 FOLLOW = "maps: following the run"
-
-
-def _amp_text(amplitude: float, units: str) -> str:
-    return f"{amplitude * 1e6:.3g} um" if units == "m" else f"{amplitude:.3g} Vpp"
 
 
 class LiveViews(QTabWidget):

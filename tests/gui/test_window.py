@@ -246,9 +246,13 @@ def test_a_disconnect_during_the_safe_state_closes_the_instruments_after_it(
     window._disconnect()
     qtbot.wait(200)
     assert closed == []  # not while the Safe state works on them
-    release.set()
-    qtbot.waitUntil(lambda: closed == [True], timeout=5000)
-    assert "before the bench was disconnected" in window.log_view.lines[-1]
+    release.set()  # the close waits on the instrument lock, the log line on the GUI thread
+    qtbot.waitUntil(
+        lambda: (
+            closed == [True] and "before the bench was disconnected" in window.log_view.lines[-1]
+        ),
+        timeout=5000,
+    )
 
 
 def test_close_during_run_aborts_safely(qtbot: Any, tmp_path: Path) -> None:
