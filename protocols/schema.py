@@ -133,24 +133,31 @@ BOUNDS: dict[str, tuple[float, float]] = {
 }
 
 
-def _within(field: str, value: float, dimension: str | None, named: bool = True) -> None:
-    """Refuse ``value`` outside :data:`BOUNDS` ``[field]`` naming the value and the range
-    (and the field, for a model-level check: ``named``)."""
+def outside_bounds(field: str, value: float, dimension: str | None) -> str | None:
+    """Why ``value`` is outside :data:`BOUNDS` ``[field]``, naming the value and the range
+    (``"100 s is outside 10 us .. 10 s"``), or None; the protocol's check and the model
+    commands' (``daq/cli/simulate_request.py``) both say it so."""
     lo, hi = BOUNDS[field]
     if math.isfinite(value) and lo <= value <= hi:
-        return
+        return None
 
     def show(x: float) -> str:
         if dimension == "time" and x >= 1000:
             return f"{x:.4g} s"
         return format_quantity(x, dimension) if dimension else f"{x:g}"
 
-    why = (
+    return (
         f"{show(value)} is outside {show(lo)} .. {show(hi)}"
         if math.isfinite(value)
         else f"{value!r} is not a finite number; give {show(lo)} .. {show(hi)}"
     )
-    raise ValueError(f"{field}: {why}" if named else why)
+
+
+def _within(field: str, value: float, dimension: str | None, named: bool = True) -> None:
+    """Refuse :func:`outside_bounds` (naming the field, for a model-level check: ``named``)."""
+    why = outside_bounds(field, value, dimension)
+    if why is not None:
+        raise ValueError(f"{field}: {why}" if named else why)
 
 
 def _whole(field: str, v: Any, low: int, high: int) -> int:

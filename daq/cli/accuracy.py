@@ -19,7 +19,7 @@ from typing import Any
 
 from daq.cli.biafc import CliError
 from daq.cli.out_check import can_write
-from daq.cli.simulate_request import simulate_request_error, within
+from daq.cli.simulate_request import simulate_request_error
 from instruments.burst import Burst
 from instruments.units import UnitError, parse_quantity
 
@@ -65,12 +65,6 @@ def _scenes(args: argparse.Namespace) -> list[Any]:
     default_duration = "2 ms" if args.quick else "10 ms"
     duration = _quantity(args.duration or default_duration, "time", "--duration")
     rate = _quantity(args.rate, "sample_rate", "--rate")
-    for why in (
-        within("--duration", duration, "duration", "time"),
-        within("--rate", rate, "rate", "sample_rate"),
-    ):
-        if why is not None:
-            raise CliError(why)
     override = parse_amplitude(args.amplitude) if args.amplitude is not None else None
     try:
         spec = dem.load_chain_spec(args.chain) if args.chain else dem.default_chain_spec()

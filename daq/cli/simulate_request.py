@@ -1,5 +1,5 @@
 """What ``biafc simulate`` refuses before the model runs: the protocol's bounds on the record
-and the burst (:data:`protocols.schema.BOUNDS`), the burst within the run and below the
+and the burst (:func:`protocols.schema.outside_bounds`), the burst within the run and below the
 record's Nyquist frequency, and the memory the run would hold.
 
 Before, only "> 0" was checked: ``--duration 100s`` at 500 kS/s grew to 24 GB and the host's
@@ -16,7 +16,7 @@ import math
 from typing import Any
 
 from instruments.units import format_quantity
-from protocols.schema import BOUNDS
+from protocols.schema import outside_bounds
 
 #: the largest output of ``biafc simulate`` or a ``biafc regime`` batch (the velocity of every
 #: cylinder and the drive, float64): a run holds 3-4 times its output while it runs (resident:
@@ -25,20 +25,11 @@ from protocols.schema import BOUNDS
 MAX_SIMULATE_BYTES = 2**30
 
 
-def _show(x: float, dimension: str) -> str:
-    return format_quantity(x, dimension) if dimension else f"{x:g}"
-
-
 def within(option: str, value: float, bound: str, dimension: str) -> str | None:
-    """Why ``value`` (SI) of ``option`` is outside the protocol's :data:`BOUNDS` ``[bound]``,
-    or None."""
-    lo, hi = BOUNDS[bound]
-    if math.isfinite(value) and lo <= value <= hi:
-        return None
-    return (
-        f"{option}: {_show(value, dimension)} is outside "
-        f"{_show(lo, dimension)} .. {_show(hi, dimension)}"
-    )
+    """Why ``value`` (SI) of ``option`` is outside the protocol's bounds ``[bound]``
+    (:func:`protocols.schema.outside_bounds`), or None."""
+    why = outside_bounds(bound, value, dimension)
+    return None if why is None else f"{option}: {why}"
 
 
 def simulate_request_error(
