@@ -17,7 +17,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from analysis.plots.quasi_bands import DIRECTION_COLOURS
-from analysis.plots.style import amplitude_scale, mark_missing, new_figure, style
+from analysis.plots.style import MISSING_AT, amplitude_scale, mark_missing, new_figure, style
 from analysis.sweep import AmplitudeSweep
 
 __all__ = ["plot_regime", "rms_ratio"]
@@ -44,7 +44,7 @@ def plot_regime(sweeps: Mapping[str, AmplitudeSweep]) -> Figure:
             r = rms_ratio(sw)
             ok = np.isfinite(r) & (amps > 0)
             missing = f"{d.upper()} failed or not measured"
-            at = 0.03 if d == "ltr" else 0.09  # both directions' crosses visible
+            at = MISSING_AT.get(d, 0.03)
             mark_missing(ax_t, amps[~ok & (amps > 0)], colour, label=missing, at=at)
             if not ok.any():
                 continue

@@ -159,6 +159,10 @@ def gap_legend_handle() -> Patch:
     return Patch(facecolor="0.88", edgecolor="0.6", hatch="//", label=GAP_LABEL)
 
 
+#: how far into the axes each direction's crosses sit (both visible at one amplitude)
+MISSING_AT = {"ltr": 0.03, "rtl": 0.09}
+
+
 def mark_missing(
     ax: Axes,
     positions: Sequence[float] | NDArray[Any],

@@ -12,6 +12,7 @@ from matplotlib.figure import Figure
 
 from analysis.plots.quasi_bands import DIRECTION_COLOURS
 from analysis.plots.style import (
+    MISSING_AT,
     add_gap_background,
     amplitude_scale,
     cell_edges,
@@ -133,7 +134,7 @@ def plot_amplitude_sweep(sweeps: Mapping[str, AmplitudeSweep]) -> Figure:
                 mark_missing(
                     ax, sw.amplitudes[~ok] / f, colour, along="y",
                     label=f"{d.upper()} far cylinder failed or not measured",
-                    at=0.03 if d == "ltr" else 0.09,
+                    at=MISSING_AT.get(d, 0.03),
                 )  # fmt: skip
                 f_in = float(np.nanmedian(sw.input_Hz))
                 if np.isfinite(sw.expected_Hz):  # none without a local-resonance band

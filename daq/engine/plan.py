@@ -308,7 +308,7 @@ def _check_model_cylinders(bf: BenchFile, chain: Any) -> None:
     if bf.bench.n_cylinders != n_model:
         field = "chain" if bf.bench.chain else "cylinder_positions"
         raise bf.doc.error(
-            ("cylinder_positions",) if field == "cylinder_positions" else ("chain",),
+            (field,),
             f"{bf.bench.n_cylinders} cylinder positions, but the simulated chain has "
             f"{n_model} cylinders: give cylinder_positions one per cylinder of the chain",
         )
