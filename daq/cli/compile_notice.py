@@ -15,11 +15,25 @@ __all__ = ["CompileNotice", "doing", "install", "ready_line", "start_line"]
 
 
 class CompileNotice:
-    """A :data:`sim_backend.dem.kernel_cache.CompileReporter` that writes to a stream."""
+    """A :data:`sim_backend.dem.kernel_cache.CompileReporter` that writes to a stream.
 
-    def __init__(self, stream: TextIO) -> None:
-        self.stream = stream
-        self.tty = stream.isatty()
+    Without a stream it writes to ``sys.stderr`` as it is when the kernel compiles, not as it
+    was when the notice was installed (a stream replaced since, e.g. closed by a test harness's
+    capture, is not written to)."""
+
+    def __init__(self, stream: TextIO | None = None) -> None:
+        self._stream = stream
+
+    @property
+    def stream(self) -> TextIO:
+        return self._stream if self._stream is not None else sys.stderr
+
+    @property
+    def tty(self) -> bool:
+        try:
+            return self.stream.isatty()
+        except ValueError:  # a closed stream
+            return False
 
     def __call__(self, phase: str, elapsed_s: float, folder: Path, cold: bool) -> None:
         if phase == "start":
@@ -50,7 +64,8 @@ def ready_line(elapsed_s: float) -> str:
 
 
 def install(stream: TextIO | None = None) -> None:
-    """Report first-use compilations of the DEM kernel on ``stream`` (default: stderr)."""
+    """Report first-use compilations of the DEM kernel on ``stream`` (default: the stderr of the
+    moment each line is written)."""
     from sim_backend.dem.kernel_cache import set_compile_reporter
 
-    set_compile_reporter(CompileNotice(stream if stream is not None else sys.stderr))
+    set_compile_reporter(CompileNotice(stream))

@@ -118,6 +118,27 @@ def test_cli_notice_says_what_happens_and_that_it_happens_once(tmp_path: Path) -
     assert "biafc warmup" in text and "12.3 s" in text
 
 
+def test_installed_notice_writes_to_the_stderr_of_the_moment(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A notice installed while one stderr was current, and a compile after that stderr was
+    replaced and closed (as a test harness's capture is), writes to the new one."""
+    from daq.cli import compile_notice
+
+    old = io.StringIO()
+    monkeypatch.setattr(sys, "stderr", old)
+    monkeypatch.setattr(kernel_cache, "_REPORTER", None)
+    compile_notice.install()
+    reporter = kernel_cache._REPORTER
+    assert reporter is not None
+    old.close()
+    new = io.StringIO()
+    monkeypatch.setattr(sys, "stderr", new)
+    reporter("start", 0.0, tmp_path, True)
+    reporter("done", 1.5, tmp_path, True)
+    assert "DEM kernel ready after 1.5 s" in new.getvalue()
+
+
 def test_biafc_warmup_command(capsys: pytest.CaptureFixture[str]) -> None:
     from daq.cli.biafc import main
 
