@@ -59,7 +59,9 @@ def run(args: argparse.Namespace) -> int:
     except CalibrationError as exc:
         raise CliError(str(exc)) from None
     data, spec = read_run_and_chain(path, args.chain)
-    can_write(args.out or path.with_name(f"{path.stem}_fitted_chain.yaml"), "--out")
+    out: Path = args.out or path.with_name(f"{path.stem}_fitted_chain.yaml")
+    _refuse_existing(out)
+    can_write(out, "--out")
     if args.figures is not None:
         can_write_folder(args.figures, "--figures")
     try:
@@ -67,7 +69,6 @@ def run(args: argparse.Namespace) -> int:
     except CalibrationError as exc:
         raise CliError(str(exc)) from None
     print(result.table())
-    out: Path = args.out or path.with_name(f"{path.stem}_fitted_chain.yaml")
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(result.chain_yaml(path.name), encoding="utf-8")
     summary = result.as_dict()
@@ -84,6 +85,18 @@ def run(args: argparse.Namespace) -> int:
     print(f"written {json_path}")
     print(f"next: biafc compare {path} --chain {out}{stroke_arg}")
     return 0 if result.success else 1
+
+
+def _refuse_existing(out: Path) -> None:
+    """A chain file (or its ``.json`` beside it) already there is not overwritten: it may be a
+    hand-made chain or an earlier fit."""
+    from daq.store.run_store import free_name
+
+    for target in (out, out.with_suffix(".json")):
+        if target.exists() and not target.is_dir():
+            raise CliError(
+                f"--out: {target} exists already; write a new file (--out {free_name(out)})"
+            )
 
 
 def _check(data, spec, result, figures: Path | None) -> dict[str, float | None]:  # type: ignore[no-untyped-def]

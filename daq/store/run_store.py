@@ -37,6 +37,7 @@ __all__ = [
     "check_output_path",
     "check_resume",
     "create_run",
+    "free_name",
     "resume_run",
     "stored_request",
     "stored_seed",
@@ -47,7 +48,7 @@ class StoreError(ValueError):
     """The output or resume file cannot be used; the message is one line."""
 
 
-def _free_name(path: Path) -> Path:
+def free_name(path: Path) -> Path:
     """The first ``NAME_2.h5``, ``NAME_3.h5``... beside ``path`` that does not exist."""
     for k in range(2, 10_000):
         cand = path.with_name(f"{path.stem}_{k}{path.suffix or '.h5'}")
@@ -78,7 +79,7 @@ def _run_status(path: Path, *, resuming: bool = False) -> str | None:
 def _complete(path: Path) -> str:
     return (
         f"--resume: {path} is complete already, nothing to continue; to measure again "
-        f"write a new file (--out {_free_name(path)})"
+        f"write a new file (--out {free_name(path)})"
     )
 
 
@@ -113,12 +114,12 @@ def check_output_path(path: Path, *, resume: bool = False) -> None:
 
             busy = in_use_by(path)  # a run writing it now: not one "left" to continue
             if busy is not None:
-                raise StoreError(f"--out: {busy}; or write a new file (--out {_free_name(path)})")
+                raise StoreError(f"--out: {busy}; or write a new file (--out {free_name(path)})")
             raise StoreError(
                 f"--out: {path} exists already (a run left {status}): continue it with "
-                f"--resume {path}, or write a new file (--out {_free_name(path)})"
+                f"--resume {path}, or write a new file (--out {free_name(path)})"
             )
-        raise StoreError(f"--out: {path} {why}; write a new file (--out {_free_name(path)})")
+        raise StoreError(f"--out: {path} {why}; write a new file (--out {free_name(path)})")
     problem = cannot_write(path, "--out")
     if problem is not None:
         raise StoreError(problem)

@@ -128,6 +128,21 @@ def test_cli_writes_a_chain_file_every_command_accepts(
     assert (cmp_dir / "comparison.json").exists()
 
 
+@pytest.mark.parametrize("existing", [".yaml", ".json"])
+def test_cli_does_not_overwrite_a_chain_file(
+    measured: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], existing: str
+) -> None:
+    """A hand-made chain file (or the summary beside it) named by --out is left as it was."""
+    out = tmp_path / "my_chain.yaml"
+    kept = out.with_suffix(existing)
+    kept.write_text("# my own chain\n")
+    rc = biafc(["calibrate", str(measured), "--fit", "F0", "--out", str(out), "--no-check"])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and len(err.splitlines()) == 1, err
+    assert f"{kept} exists already" in err and "my_chain_2.yaml" in err
+    assert kept.read_text() == "# my own chain\n"
+
+
 def test_cli_refusal_is_one_line_with_exit_2(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
