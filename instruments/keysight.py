@@ -242,7 +242,12 @@ class KeysightGenerator:
             )
 
     def connect(self) -> str:
-        """``*CLS`` (clear a stale error queue), ``*IDN?``; returns the identity."""
+        """Device clear (a reply that an earlier session left unread is dropped: ``*CLS``
+        clears the error queue, not the output queue), ``*CLS`` (a stale error queue),
+        ``*IDN?``; returns the identity."""
+        clear = getattr(self.transport, "clear", None)
+        if clear is not None:
+            clear()
         self.transport.write("*CLS")
         return self.identify()
 
@@ -435,7 +440,7 @@ class KeysightGenerator:
         :class:`InstrumentTimeout`, a reply other than 0/1 :class:`ReplyError`.
         """
         self._check_channel(channel)
-        reply = self.transport.query(f"OUTP{channel}?").strip().upper()
+        reply = self._query(f"OUTP{channel}?").strip().upper()
         if reply in ("1", "+1", "ON"):
             return True
         if reply in ("0", "+0", "OFF"):

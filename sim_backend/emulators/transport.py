@@ -26,7 +26,8 @@ class SimTransport:
     :class:`InstrumentTimeout` after ``clock.sleep(timeout_s)`` (simulated time passes as it
     would on the bench; any clock with ``now``/``sleep`` works, e.g. :class:`SimClock`).
     A reply of several lines (late replies arriving before the current one) is read line by
-    line: the query returns the first, :meth:`read` the next. :meth:`clear` is a device clear
+    line: the query returns the first, :meth:`read` the next; a line not read stays for the
+    next query unless the link is serial (below). :meth:`clear` is a device clear
     (pending lines dropped, the emulator's ``clear()`` called when it has one).
     ``baud_rate``: the line speed this end talks at (``None``: not a serial line); an emulator
     with a ``baud_rate`` of its own hears only garbage at another speed and never answers.
@@ -71,13 +72,18 @@ class SimTransport:
             self._pending.extend(reply.split("\n"))
 
     def query(self, command: str) -> str:
-        self._pending.clear()
+        """Send ``command`` and read one line. A serial line (``baud_rate`` set) drops what was
+        waiting first, as the driver's serial transport flushes its receive buffer; on a
+        network link (VXI-11, sockets) nothing is flushed, so a line left unread (a late
+        reply) answers this query, as the instrument's output queue would."""
+        if self.baud_rate is not None:
+            self._pending.clear()
         reply = self._send(command.encode("ascii"), command)
-        if reply is None:
+        if reply is not None:
+            self._pending.extend(reply.split("\n"))
+        if not self._pending or not self.emulator.responsive:
             raise self._timeout(command)
-        first, *rest = reply.split("\n")
-        self._pending.extend(rest)
-        return first
+        return self._pending.pop(0)
 
     def write_block(self, header: str, data: bytes) -> None:
         reply = self._send(header.encode("ascii") + encode_block(data), header)

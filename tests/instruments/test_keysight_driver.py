@@ -126,7 +126,8 @@ def test_the_snapshot_reads_the_outputs_and_never_claims_off_unread() -> None:
     """Before, the snapshot gave the state last asked for: after an unsafe end (the off never
     confirmed) the bench window listed both outputs "False". Now it asks ``OUTPn?``; a generator
     that does not answer gives ``None`` and the reason."""
-    gen = KeysightGenerator(ScriptedTransport([("OUTP1?", "0"), ("OUTP2?", None)]), LIMITS)
+    script = [("OUTP1?", "0"), ("OUTP2?", None), ("*OPC?", None)]
+    gen = KeysightGenerator(ScriptedTransport(script), LIMITS)
     chans = gen.snapshot()["channels"]
     assert chans["1"] == {"output_on": False}
     assert chans["2"]["output_on"] is None and "OUTP2?" in chans["2"]["output_error"]

@@ -34,6 +34,44 @@ def test_late_reply_after_a_timeout_is_never_read_as_the_next_answer() -> None:
     assert gen.errors() == []
 
 
+def test_a_late_output_state_is_not_read_as_the_next_channels() -> None:
+    """A second reader: ``OUTP1?`` answered late, and its "0" was read as channel 2's state on
+    a network link, so the snapshot said off for an output that was on."""
+    gen, emu = on_emulator()
+    emu.channels[2].output_on = True
+    emu.late_replies = 1
+    chans = gen.snapshot()["channels"]
+    assert chans["1"]["output_on"] is None and "OUTP1?" in chans["1"]["output_error"]
+    assert chans["2"]["output_on"] is True
+    assert gen.errors() == []
+
+
+def test_a_line_left_unread_answers_the_next_query_on_a_network_link() -> None:
+    """The transport double keeps what a network link keeps: a late reply waits in the output
+    queue and answers the next query (only a serial line is flushed before each query)."""
+    emu = KeysightEmulator()
+    lan = SimTransport(emu, "generator", 2.0, SimClock())
+    emu.late_replies = 1
+    with pytest.raises(InstrumentTimeout):
+        lan.query("*OPC?")
+    assert lan.query("*IDN?") == "1"  # the late reply first
+    assert lan.query("SYST:ERR?").count(",") == 3  # then the identity, still waiting
+    assert lan.read().startswith("+0")
+
+
+def test_connect_drops_a_reply_an_earlier_session_left_unread() -> None:
+    """*CLS clears the error queue, not the output queue: a stale line would have answered
+    *IDN? and shifted every answer after it."""
+    emu = KeysightEmulator()
+    earlier = SimTransport(emu, "generator", 2.0, SimClock())
+    emu.late_replies = 1
+    with pytest.raises(InstrumentTimeout):
+        earlier.query("OUTP1?")  # the session crashes here; its "0" is still queued
+    gen = KeysightGenerator(earlier, LIMITS)
+    assert gen.connect().count(",") == 3
+    assert gen.output_state(1) is False and gen.errors() == []
+
+
 def test_connect_clears_a_stale_error_queue() -> None:
     gen, emu = on_emulator()
     emu.push_error(-350, "Queue overflow")  # left over from the last session
