@@ -159,8 +159,12 @@ class EmulatedInstruments:
             return self.position_m
         return float(self.stage.position_m())
 
-    def vibrometer_range_and_delay(self) -> tuple[str, float]:
-        return self.vibrometer.range_name, float(self.vibrometer.delay_s)
+    def vibrometer_range_and_delay(self) -> tuple[str, float, float]:
+        """The decoder's range name, its signal delay (s) and its sensitivity ((m/s)/V), from
+        the emulator's own range table (not the driver's parser: a misread range would
+        otherwise be wrong on both sides alike)."""
+        vib = self.vibrometer
+        return vib.range_name, float(vib.delay_s), float(vib.sensitivity_m_per_s_per_V())
 
     def _on_trigger(self, fired: tuple[int, ...]) -> None:
         from sim_backend.simbench.world import ChannelPlay

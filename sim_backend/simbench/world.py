@@ -50,7 +50,7 @@ if TYPE_CHECKING:
     from sim_backend.emulators import SimClock
     from sim_backend.simbench.emulated import WorldTransport
 
-__all__ = ["ChannelPlay", "SimWorld", "TriggerEvent", "sensitivity_from_range_name"]
+__all__ = ["ChannelPlay", "SimWorld", "TriggerEvent"]
 
 #: vibrometer signal level on a cylinder, between cylinders, and with the signal lost
 LEVEL_ON_TARGET = 0.85
@@ -58,14 +58,6 @@ LEVEL_BETWEEN = 0.03
 LEVEL_LOST = 0.0
 #: decoder output noise (m/s rms) without an optical signal: the decoder outputs garbage
 NO_SIGNAL_NOISE_FACTOR = 100.0
-
-
-def sensitivity_from_range_name(name: str) -> float:
-    """(m/s)/V from a decoder range name such as ``"VD-09 10mm/s/V"`` (the driver's parser, so
-    the world and the driver read the same number)."""
-    from instruments.polytec import parse_sensitivity
-
-    return parse_sensitivity(name)
 
 
 @dataclass(frozen=True)
@@ -109,6 +101,7 @@ class TriggerEvent:
     stage_position_m: float
     range_name: str
     decoder_delay_s: float
+    sensitivity_m_per_s_per_V: float
     signal_lost: bool
     meta: dict[str, Any] = field(default_factory=dict)
 
@@ -218,13 +211,14 @@ class SimWorld:
         """The generator fired (``*TRG``): ``plays`` are the channels whose output is ON. The
         armed digitiser (on the wired terminal) latches the event."""
         self.n_triggers += 1
-        range_name, delay_s = self._inst.vibrometer_range_and_delay()
+        range_name, delay_s, sensitivity = self._inst.vibrometer_range_and_delay()
         event = TriggerEvent(
             time_s=self.clock.now(),
             plays=tuple(plays),
             stage_position_m=self._inst.stage_position_m(),
             range_name=range_name,
             decoder_delay_s=delay_s,
+            sensitivity_m_per_s_per_V=sensitivity,
             signal_lost=self.faults.vibrometer_signal_lost
             and self.faults.active(self.n_acquisitions),
         )
@@ -327,7 +321,7 @@ class SimWorld:
             noise = max(noise, 1e-6) * NO_SIGNAL_NOISE_FACTOR
             meta["signal"] = "lost" if event.signal_lost else "between cylinders"
         rng = self._noise_rng(stream, cylinder)
-        sens = sensitivity_from_range_name(event.range_name)
+        sens = event.sensitivity_m_per_s_per_V
         decoded = decoder_output(velocity, sens, cfg.vibrometer_full_scale_V, noise, rng)
         velocity_V = digitise(decoded, ranges_V[0], cfg.adc_bits, cfg.digitiser_noise_V_rms, rng)
         reference_V = digitise(reference, ranges_V[1], cfg.adc_bits, cfg.digitiser_noise_V_rms, rng)

@@ -190,6 +190,20 @@ def test_record_is_the_scaled_dem_velocity_of_the_cylinder_under_the_laser() -> 
     assert np.max(np.abs(acq.reference_V)) == pytest.approx(1.0, abs=0.02)
 
 
+def test_the_world_reads_the_range_from_the_emulators_table_not_the_drivers(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The world scaled the velocity with the driver's own range parser: a misread range would
+    have been wrong on both sides alike, and no simulated run could show it."""
+    import instruments.polytec
+
+    monkeypatch.setattr(instruments.polytec, "parse_sensitivity", lambda name: 123.0)
+    world = make_world(digitiser_noise_V_rms=0.0, vibrometer_noise_m_per_s_rms=0.0)
+    at_cylinder(world, 3)
+    acq = acquire(world, [play(vpp=2.0)])
+    assert acq.meta["sensitivity_m_per_s_per_V"] == 0.01  # the emulator's VD-09 10mm/s/V
+
+
 def test_rtl_channel_and_output_off() -> None:
     world = make_world(digitiser_noise_V_rms=0.0, vibrometer_noise_m_per_s_rms=0.0)
     at_cylinder(world, 1)
