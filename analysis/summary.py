@@ -10,8 +10,16 @@ cylinder and its output peak has moved from the input:
 - frequency: ``|detuning| >= DETUNING_MIN_FRACTION * f_in``;
 
 then ``"down"`` (output below input) or ``"up"``; otherwise ``"none"``. Points where the far or
-the entry cylinder was not measured get ``"not measured"``, and ``"failed: entry point"`` (or
-far) where that point was measured and failed.
+the entry cylinder was not measured get ``"not measured"``, ``"failed: entry point"`` (or
+far) where that point was measured and failed, and ``"not scanned: far cylinder 31"`` (or
+entry) where the scan does not hold that cylinder.
+
+Noise (:mod:`analysis.noise_floor`): a point whose far record holds no more than the noise of
+its own pre-trigger samples is ``"none"``, and says so (``at_noise_floor``, its transmission
+only as an upper bound, no output peak): nothing passed that the bench could see. When the
+linear reference is itself at the noise floor, every gain is a lower bound; a point that stands
+above the noise and has moved from the input, but whose lower bound stays below ``GAIN_MIN``,
+is ``"undetermined"``: the run cannot tell whether the nonlinearity let it through.
 
 Why a gain and not a level: a short burst is broad, and in the linear regime its tail near the
 frequency where the end cylinders' bands nearly meet leaks through (about 1e-3 of the energy
@@ -71,16 +79,21 @@ def _num(x: float) -> float | None:
 
 
 def _failed_ends(sweep: AmplitudeSweep, scan: ScanData | None, a: int) -> str | None:
-    """Which of the sweep's entry and far points failed at amplitude ``a`` ("entry", "far",
-    "entry and far"), or None; None without the scan."""
+    """Why the conversion at amplitude ``a`` cannot be judged, when the ``scan`` tells:
+    ``"not scanned: far cylinder 31"`` (or entry) when the scan does not hold that cylinder,
+    ``"failed: far point"`` (entry, entry and far) when it failed; None otherwise."""
     if scan is None:
         return None
-    hit = []
+    hit, absent = [], []
     for name, number in (("entry", sweep.entry), ("far", sweep.far)):
         c = np.nonzero(scan.cylinders == number)[0]
-        if c.size and scan.done[a, int(c[0])] == PointState.FAILED:
+        if not c.size:
+            absent.append(f"{name} cylinder {number}")
+        elif scan.done[a, int(c[0])] == PointState.FAILED:
             hit.append(name)
-    return " and ".join(hit) or None
+    if absent:
+        return "not scanned: " + " and ".join(absent)
+    return f"failed: {' and '.join(hit)} point" if hit else None
 
 
 def summary_rows(sweep: AmplitudeSweep, scan: ScanData | None = None) -> list[dict[str, Any]]:
@@ -89,15 +102,20 @@ def summary_rows(sweep: AmplitudeSweep, scan: ScanData | None = None) -> list[di
     failed says so ("failed: far point"), not "not measured"."""
     rows = []
     for a, amp in enumerate(sweep.amplitudes):
+        floor = bool(sweep.at_noise_floor[a])
+        gain = float(sweep.transmission_gain[a])
+        detuning = float(sweep.detuning_Hz[a])
         verdict = conversion_verdict(
-            float(sweep.detuning_Hz[a]),
-            float(sweep.input_Hz[a]),
-            float(sweep.transmission[a]),
-            float(sweep.transmission_gain[a]),
+            detuning, float(sweep.input_Hz[a]), float(sweep.transmission[a]), gain
         )
-        failed = _failed_ends(sweep, scan, a) if verdict == "not measured" else None
-        if failed is not None:
-            verdict = f"failed: {failed} point"
+        if floor:
+            verdict = "none"
+        elif verdict == "none" and sweep.reference_is_bound and math.isfinite(gain):
+            moved = abs(detuning) >= DETUNING_MIN_FRACTION * float(sweep.input_Hz[a])
+            verdict = "undetermined" if moved and gain < GAIN_MIN else verdict
+        why = _failed_ends(sweep, scan, a) if verdict == "not measured" else None
+        if why is not None:
+            verdict = why
         rows.append(
             {
                 "direction": sweep.direction,
@@ -108,6 +126,10 @@ def summary_rows(sweep: AmplitudeSweep, scan: ScanData | None = None) -> list[di
                 "detuning_Hz": _num(sweep.detuning_Hz[a]),
                 "transmission": _num(sweep.transmission[a]),
                 "transmission_gain": _num(sweep.transmission_gain[a]),
+                "gain_is_lower_bound": bool(sweep.reference_is_bound),
+                "far_noise_ratio": _num(sweep.far_noise_ratio[a]),
+                "at_noise_floor": floor,
+                "transmission_upper_bound": _num(sweep.transmission_bound[a]),
                 "expected_output_Hz": _num(sweep.expected_Hz),
                 "conversion": verdict,
             }
@@ -166,12 +188,26 @@ def format_summary(summary: dict[str, Any]) -> str:
     ]
     for r in summary["rows"]:
         tr = "-" if r["transmission"] is None else f"{r['transmission']:.3g}"
+        if r.get("at_noise_floor") and r.get("transmission_upper_bound") is not None:
+            tr = f"<{r['transmission_upper_bound']:.2g}"
         gain = "-" if r["transmission_gain"] is None else f"{r['transmission_gain']:.3g}"
+        if r["transmission_gain"] is not None and r.get("gain_is_lower_bound"):
+            gain = f">={r['transmission_gain']:.2g}"
         amp = amplitude_label(r["amplitude"], r["amplitude_units"])
         lines.append(
             f"{r['direction']:4} {amp:>12} {khz(r['input_Hz']):>9} {khz(r['output_Hz']):>9} "
             f"{khz(r['detuning_Hz']):>10} {khz(r['expected_output_Hz']):>10} {tr:>10} {gain:>7}  "
             f"{r['conversion']}"
+        )
+    if any(r.get("at_noise_floor") for r in summary["rows"]):
+        lines.append(
+            "<x: the far end held no more than the noise of its own pre-trigger samples; "
+            "the ratio is at most x and no output peak is given"
+        )
+    if any(r.get("gain_is_lower_bound") for r in summary["rows"]):
+        lines.append(
+            ">=x: the smallest amplitude is at the noise floor, so the linear reference is an "
+            "upper bound and the gains lower bounds"
         )
     for name, why in summary.get("figures_left_out", {}).items():
         lines.append(f"left out {name}: {why}")

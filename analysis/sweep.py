@@ -13,6 +13,13 @@ and however much of its tail leaks through where the end cylinders' bands nearly
 gain grows only when the contacts act nonlinearly. It therefore needs the smallest amplitude of
 the sweep to be in the linear regime (dynamic overlap well below the static one, about 1 um
 for the default chain), and is NaN when fewer than two amplitudes were measured.
+
+Noise (:mod:`analysis.noise_floor`). Where the far record holds no more than the noise its
+pre-trigger samples show (``at_noise_floor``), its transmission is only bounded from above
+(``transmission_bound``), its spectral peak is a noise line and is not given (``output_Hz`` and
+``detuning_Hz`` NaN), and it has no gain. When the smallest amplitude is at the noise floor, the
+linear reference is the tightest such bound below the first amplitude that stands above the
+noise (``reference_is_bound``), and every gain is then a lower bound.
 """
 
 from __future__ import annotations
@@ -30,8 +37,9 @@ from analysis.bands import (
     far_cylinder,
     peak_search_range_Hz,
 )
+from analysis.noise_floor import RESOLVED_FACTOR, noise_energy, resolved
 from analysis.spectra import amplitude_spectrum, peak_frequency
-from analysis.transmission import energy_transmission
+from analysis.transmission import signal_energy
 from protocols.runfile import ChainInfo, ScanData
 
 __all__ = [
@@ -39,6 +47,7 @@ __all__ = [
     "amplitude_sweep",
     "cylinder_index",
     "input_frequency_Hz",
+    "linear_reference",
     "output_peak_definition",
     "transmission_gain",
 ]
@@ -49,7 +58,12 @@ class AmplitudeSweep:
     """One direction's sweep. Shapes: ``amplitudes [A]``, ``freq_Hz [F]``, ``magnitude [A, F]``
     (far-cylinder velocity spectrum, m; NaN rows where not measured), ``input_Hz [A]``,
     ``output_Hz [A]``, ``detuning_Hz [A]``, ``transmission [A]`` (E_far / E_entry),
-    ``transmission_gain [A]`` (transmission over that of the smallest measured amplitude)."""
+    ``transmission_gain [A]`` (transmission over the linear reference), ``far_noise_ratio
+    [A]`` (the far record's energy over the noise's, NaN without pre-trigger samples),
+    ``at_noise_floor [A]`` (measured, and not above the noise), ``transmission_bound [A]`` (an
+    upper bound of the transmission where at the noise floor, NaN elsewhere);
+    ``reference``: the linear reference (E_far / E_entry, NaN without one);
+    ``reference_is_bound``: it is such a bound, so the gains are lower bounds."""
 
     direction: str
     amplitudes: NDArray[np.float64]
@@ -65,6 +79,11 @@ class AmplitudeSweep:
     transmission_gain: NDArray[np.float64]
     expected_Hz: float
     f_range_Hz: tuple[float, float]
+    far_noise_ratio: NDArray[np.float64]
+    at_noise_floor: NDArray[np.bool_]
+    transmission_bound: NDArray[np.float64]
+    reference: float
+    reference_is_bound: bool
 
 
 def cylinder_index(scan: ScanData, number: int) -> int | None:
@@ -74,20 +93,26 @@ def cylinder_index(scan: ScanData, number: int) -> int | None:
 
 
 def input_frequency_Hz(scan: ScanData) -> NDArray[np.float64]:
-    """Input frequency per amplitude ``[A]`` (Hz): the peak of the drive spectrum of the first
-    measured point at that amplitude, else the burst's centre frequency."""
+    """Input frequency per amplitude ``[A]`` (Hz): the median peak of the drive spectra of the
+    measured points at that amplitude (one record at a small drive is noisy: 8.887 kHz for an
+    8.92 kHz carrier), else the burst's centre frequency."""
     rate = scan.sample_rate_Hz
     f_c = scan.f_center_Hz
     out = np.full(len(scan.amplitudes), f_c, dtype=np.float64)
     for a in range(len(scan.amplitudes)):
-        for c in range(len(scan.cylinders)):
-            d = scan.drive[a, c]
-            if scan.done[a, c] == 1 and np.all(np.isfinite(d)) and np.any(d != 0):
-                spec = amplitude_spectrum(d, rate)
-                f = float(peak_frequency(spec, 0.3 * f_c, 3.0 * f_c))
-                if math.isfinite(f):
-                    out[a] = f
-                break
+        rows = [
+            scan.drive[a, c]
+            for c in range(len(scan.cylinders))
+            if scan.done[a, c] == 1
+            and np.all(np.isfinite(scan.drive[a, c]))
+            and np.any(scan.drive[a, c] != 0)
+        ]
+        if not rows:
+            continue
+        peaks = peak_frequency(amplitude_spectrum(np.asarray(rows), rate), 0.3 * f_c, 3.0 * f_c)
+        peaks = np.asarray(peaks, dtype=np.float64)
+        if np.any(np.isfinite(peaks)):
+            out[a] = float(np.nanmedian(peaks))
     return out
 
 
@@ -110,9 +135,18 @@ def amplitude_sweep(scan: ScanData, chain: ChainInfo) -> AmplitudeSweep:
     v_far = scan.velocity[:, i_far, :].astype(np.float64) if i_far is not None else nan_rec
     v_entry = scan.velocity[:, i_entry, :].astype(np.float64) if i_entry is not None else nan_rec
     spec = amplitude_spectrum(v_far, rate).band(*f_range)
-    out_hz = peak_frequency(spec)
     in_hz = input_frequency_Hz(scan)
-    transmission = energy_transmission(v_entry, v_far, rate)
+    e_far = signal_energy(v_far, rate)
+    e_entry = signal_energy(v_entry, rate)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        transmission = np.where(e_entry > 0, e_far / e_entry, np.nan)
+        noise = noise_energy(v_far, scan.time_s, rate)
+        noise_ratio = np.where(noise > 0, e_far / noise, np.where(noise == 0, np.inf, np.nan))
+        floor = np.isfinite(transmission) & ~resolved(e_far, noise)
+        bound = np.where(floor, RESOLVED_FACTOR * noise / e_entry, np.nan)
+    out_hz = np.where(floor, np.nan, peak_frequency(spec))  # a noise line is no output peak
+    reference, is_bound = linear_reference(scan.amplitudes, transmission, floor, bound)
+    gain = np.where(np.isfinite(transmission) & ~floor, transmission / reference, np.nan)
     return AmplitudeSweep(
         direction=scan.direction,
         amplitudes=np.asarray(scan.amplitudes, dtype=np.float64),
@@ -125,9 +159,14 @@ def amplitude_sweep(scan: ScanData, chain: ChainInfo) -> AmplitudeSweep:
         output_Hz=out_hz,
         detuning_Hz=out_hz - in_hz,
         transmission=transmission,
-        transmission_gain=transmission_gain(scan.amplitudes, transmission),
+        transmission_gain=gain,
         expected_Hz=expected_output_Hz(scan.f_center_Hz, scan.direction, onset, cutoff),
         f_range_Hz=f_range,
+        far_noise_ratio=noise_ratio,
+        at_noise_floor=floor,
+        transmission_bound=bound,
+        reference=reference,
+        reference_is_bound=is_bound,
     )
 
 
@@ -146,15 +185,39 @@ def output_peak_definition(sweep: AmplitudeSweep) -> str:
     )
 
 
-def transmission_gain(
-    amplitudes: NDArray[np.float64], transmission: NDArray[np.float64]
-) -> NDArray[np.float64]:
-    """``transmission [A]`` over the transmission at the smallest amplitude where it is finite
-    and > 0 (the linear reference); all NaN when fewer than two amplitudes are finite."""
+def linear_reference(
+    amplitudes: NDArray[np.float64],
+    transmission: NDArray[np.float64],
+    at_noise_floor: NDArray[np.bool_],
+    bound: NDArray[np.float64],
+) -> tuple[float, bool]:
+    """The linear reference of a sweep's gains and whether it is only an upper bound.
+
+    The transmission at the smallest measured amplitude (finite and > 0) when its far record
+    stands above the noise; when it does not, the smallest upper ``bound`` of the points at the
+    noise floor below the first amplitude that stands above it (a linear chain passes the same
+    fraction at every amplitude, so each such bound bounds the linear fraction). NaN when fewer
+    than two amplitudes were measured."""
     amps = np.abs(np.asarray(amplitudes, dtype=np.float64))
     t = np.asarray(transmission, dtype=np.float64)
     ok = np.isfinite(t) & (t > 0)
     if np.count_nonzero(ok) < 2:
-        return np.full(t.shape, np.nan)
-    ref = t[ok][np.argmin(amps[ok])]
+        return math.nan, False
+    first = int(np.flatnonzero(ok)[np.argmin(amps[ok])])
+    if not at_noise_floor[first]:
+        return float(t[first]), False
+    above = ok & ~at_noise_floor
+    first_above = float(np.min(amps[above])) if above.any() else math.inf
+    below = ok & at_noise_floor & (amps < first_above) & np.isfinite(bound)
+    return float(np.min(bound[below])), True
+
+
+def transmission_gain(
+    amplitudes: NDArray[np.float64], transmission: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """``transmission [A]`` over the transmission at the smallest amplitude where it is finite
+    and > 0 (the linear reference, with no noise estimate: :func:`linear_reference`); all NaN
+    when fewer than two amplitudes are finite."""
+    t = np.asarray(transmission, dtype=np.float64)
+    ref, _ = linear_reference(amplitudes, t, np.zeros(t.shape, bool), np.full(t.shape, np.nan))
     return np.where(np.isfinite(t), t / ref, np.nan)

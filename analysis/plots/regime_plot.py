@@ -4,13 +4,17 @@ directions, with the linear floor, and the converted far-end peak frequency.
 Top: ``sqrt(E_far / E_entry)`` (the far/near rms ratio, dimensionless) per amplitude, log-log;
 the dashed line of each direction is its linear floor, the ratio at the smallest amplitude (a
 linear chain passes the same fraction at every amplitude, so what rises above the floor is
-what the nonlinearity lets through). Bottom: the far cylinder's output peak (kHz) per
+what the nonlinearity lets through). A point whose far end held no more than its noise is drawn
+as a downward triangle at the ratio's upper bound; when the smallest amplitude is one, the floor
+is the tightest such bound, drawn "at most", and the gains are lower bounds
+(:mod:`analysis.sweep`). Bottom: the far cylinder's output peak (kHz) per
 amplitude, with the input frequency (dashed) and the far cylinder's band edge that the
 conversion heads for (dotted).
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 
 import numpy as np
@@ -42,20 +46,31 @@ def plot_regime(sweeps: Mapping[str, AmplitudeSweep]) -> Figure:
             colour = DIRECTION_COLOURS.get(d, "k")
             amps = sw.amplitudes / factor
             r = rms_ratio(sw)
-            ok = np.isfinite(r) & (amps > 0)
+            measured = np.isfinite(r) & (amps > 0)
+            noisy = measured & sw.at_noise_floor
+            ok = measured & ~noisy
             missing = f"{d.upper()} failed or not measured"
             at = MISSING_AT.get(d, 0.03)
-            mark_missing(ax_t, amps[~ok & (amps > 0)], colour, label=missing, at=at)
+            mark_missing(ax_t, amps[~measured & (amps > 0)], colour, label=missing, at=at)
+            if noisy.any():
+                ax_t.plot(amps[noisy], np.sqrt(sw.transmission_bound[noisy]), "v", color=colour,
+                          mfc="none", ls="none",
+                          label=f"{d.upper()} at the noise floor (at most)")  # fmt: skip
             if not ok.any():
                 continue
-            floor = float(r[ok][np.argmin(amps[ok])])
+            floor = float(np.sqrt(sw.reference)) if np.isfinite(sw.reference) else math.nan
             top = float(np.nanmax(r[ok]))
-            ax_t.plot(amps[ok], r[ok], MARKERS.get(d, "o-"), color=colour,
-                      label=f"{d.upper()} (x{top / floor:.3g} over the floor)")  # fmt: skip
-            ax_t.axhline(floor, color=colour, ls="--", lw=1,
-                         label=f"{d.upper()} linear floor {floor:.2g}")  # fmt: skip
+            bound = sw.reference_is_bound
+            over = f" (x{'>=' if bound else ''}{top / floor:.3g} over the floor)"
+            label = d.upper() + (over if math.isfinite(floor) else "")
+            ax_t.plot(amps[ok], r[ok], MARKERS.get(d, "o-"), color=colour, label=label)
+            if math.isfinite(floor):
+                ax_t.axhline(floor, color=colour, ls="--", lw=1,
+                             label=f"{d.upper()} linear floor {'at most ' if bound else ''}"
+                             f"{floor:.2g}")  # fmt: skip
             fo = np.isfinite(sw.output_Hz) & (amps > 0)
-            mark_missing(ax_f, amps[~fo & (amps > 0)], colour, label=missing, at=at)
+            gone = ~fo & (amps > 0) & ~noisy  # no peak at the noise floor is no missing point
+            mark_missing(ax_f, amps[gone], colour, label=missing, at=at)
             ax_f.plot(amps[fo], sw.output_Hz[fo] / 1e3, MARKERS.get(d, "o-"), color=colour,
                       label=f"{d.upper()} far-end peak")  # fmt: skip
             f_in = float(np.nanmedian(sw.input_Hz))

@@ -68,7 +68,7 @@ def _map(ax: Axes, sw: AmplitudeSweep) -> QuadMesh:
     ax.set_ylabel(f"drive amplitude ({unit})")
     ax.set_title(f"{sw.direction.upper()}: far cylinder #{sw.far}")
     handles, _ = ax.get_legend_handles_labels()
-    if not np.all(ok):
+    if not np.all(ok | sw.at_noise_floor):  # a row at the noise floor is drawn, with no peak
         handles.append(gap_legend_handle())
     ax.legend(handles=handles, loc="lower left", fontsize=8, framealpha=0.85)
     return mesh
@@ -123,7 +123,9 @@ def plot_amplitude_sweep(sweeps: Mapping[str, AmplitudeSweep]) -> Figure:
                 ):
                     # a gain that cannot be read (the entry point failed) says so
                     ax.annotate(
-                        f"×{g:.3g}" if np.isfinite(g) else "× n/a",
+                        f"×{'≥' if sw.reference_is_bound else ''}{g:.3g}"
+                        if np.isfinite(g)
+                        else "× n/a",
                         (x, y),
                         textcoords="offset points",
                         xytext=(0, 6),
@@ -131,8 +133,9 @@ def plot_amplitude_sweep(sweeps: Mapping[str, AmplitudeSweep]) -> Figure:
                         fontsize=8,
                         color=colour,
                     )
+                gone = ~ok & ~sw.at_noise_floor  # at the noise floor: measured, no peak
                 mark_missing(
-                    ax, sw.amplitudes[~ok] / f, colour, along="y",
+                    ax, sw.amplitudes[gone] / f, colour, along="y",
                     label=f"{d.upper()} far cylinder failed or not measured",
                     at=MISSING_AT.get(d, 0.03),
                 )  # fmt: skip

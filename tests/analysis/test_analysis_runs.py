@@ -279,3 +279,14 @@ def test_a_direction_with_one_amplitude_is_left_out_of_the_sweep(tmp_path: Path)
     report = write_figures(data, tmp_path / "figs")
     assert "amplitude_sweep" in report.figures
     assert "rtl" in report.skipped["amplitude_sweep (rtl)"]
+
+
+def test_a_far_cylinder_outside_the_scan_is_named_not_called_unmeasured(tmp_path: Path) -> None:
+    """smoke.yaml scans cylinders 1, 8 and 16: every point measured, and the summary said
+    "not measured" for each amplitude (a second reader)."""
+    from daq.cli.run_protocol import main as run_protocol
+
+    out = tmp_path / "smoke.h5"
+    assert run_protocol(["smoke.yaml", "--out", str(out), "-q"]) == 0
+    rows = summarize(read_run(out))["rows"]
+    assert [r["conversion"] for r in rows] == ["not scanned: far cylinder 31"] * 2

@@ -1,0 +1,109 @@
+"""The far end at the noise floor: a bound, not a measurement (a second reader found the
+shipped sweep's figures calling the RTL conversion at 5 um "none": its linear reference, the
+10 nm point, was the digitiser's noise, and so were the output peaks of the small drives)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from analysis.noise_floor import RESOLVED_FACTOR, noise_energy, resolved
+from analysis.summary import format_summary, summarize
+from analysis.sweep import input_frequency_Hz, linear_reference
+from daq.cli.run_protocol import main as run_protocol
+from protocols.runfile import read_run
+
+PROTOCOL = """\
+name: noise_floor
+directions: both
+burst:
+  ltr: {f_center: 8.92 kHz, shape: narrowband}
+  rtl: {f_center: 6.63 kHz, shape: narrowband}
+amplitudes: [10 nm, 143 nm, 5 um]
+cylinders: [1, 31]
+averages: 2
+acquisition: {rate: 500 kS/s, duration: 25 ms, pre_trigger: 1 ms}
+settle: 50 ms
+order: [direction, amplitude, cylinder]
+on_point_failure: continue
+"""
+
+
+@pytest.fixture(scope="module")
+def small_sweep(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The shipped sweep's settings (and its default range, 10 mm/s/V) at three amplitudes,
+    on the end cylinders only."""
+    folder = tmp_path_factory.mktemp("noise")
+    protocol = folder / "noise_floor.yaml"
+    protocol.write_text(PROTOCOL)
+    out = folder / "run.h5"
+    assert run_protocol([str(protocol), "--out", str(out), "-q"]) == 0
+    return out
+
+
+def test_noise_energy_is_the_pre_trigger_mean_square_over_the_record() -> None:
+    t = np.arange(-20, 80) / 1e3
+    x = np.where(t < 0, 2.0, 0.5)[None, :] * np.ones((3, 1))
+    e = noise_energy(x, t, 1e3)
+    assert e.shape == (3,) and np.allclose(e, 4.0 * 100 / 1e3)
+    assert np.all(np.isnan(noise_energy(x[:, 10:], t[10:], 1e3)))  # 10 samples: no estimate
+    assert list(resolved([1.0, 3.9, 4.0, np.nan, 1.0], [np.nan, 1.0, 1.0, 1.0, 0.0])) == [
+        True, False, True, False, True,
+    ]  # fmt: skip
+    assert RESOLVED_FACTOR == 4.0
+
+
+def test_the_linear_reference_is_the_tightest_bound_below_the_first_resolved_point() -> None:
+    amps = np.array([1.0, 2.0, 3.0, 4.0])
+    t = np.array([0.1, 0.02, 0.03, 0.5])
+    floor = np.array([True, True, False, False])
+    bound = np.array([0.4, 0.08, np.nan, np.nan])
+    assert linear_reference(amps, t, floor, bound) == (0.08, True)
+    assert linear_reference(amps, t, np.zeros(4, bool), bound) == (0.1, False)
+    assert np.isnan(linear_reference(amps[:1], t[:1], floor[:1], bound[:1])[0])
+
+
+def test_points_at_the_noise_floor_are_bounds_and_the_conversion_still_shows(
+    small_sweep: Path,
+) -> None:
+    summary = summarize(read_run(small_sweep))
+    rows = {(r["direction"], round(r["amplitude"] * 1e9)): r for r in summary["rows"]}
+    for d in ("ltr", "rtl"):
+        for nm in (10, 143):
+            row = rows[(d, nm)]
+            assert row["at_noise_floor"] and row["conversion"] == "none", row
+            assert row["output_Hz"] is None and row["transmission_gain"] is None
+            assert row["far_noise_ratio"] < RESOLVED_FACTOR
+            assert row["transmission_upper_bound"] >= row["transmission"]
+        high = rows[(d, 5000)]
+        assert not high["at_noise_floor"] and high["far_noise_ratio"] > 100
+        assert high["gain_is_lower_bound"] and high["transmission_gain"] >= 10
+    # the paper's claim: converted down from the left, up from the right
+    assert rows[("ltr", 5000)]["conversion"] == "down"
+    assert rows[("rtl", 5000)]["conversion"] == "up"
+    text = format_summary(summary)
+    assert "<x: the far end held no more than the noise" in text and ">=" in text
+
+
+def test_the_input_frequency_is_the_median_of_the_drive_records() -> None:
+    """One noisy drive record at a small drive gave 8.887 kHz for an 8.92 kHz carrier."""
+    rate, n = 500e3, 12_500
+    t = np.arange(n) / rate
+    rng = np.random.default_rng(1)
+
+    def drive(f_Hz: float) -> np.ndarray:
+        return np.sin(2 * np.pi * f_Hz * t) + 0.01 * rng.standard_normal(n)
+
+    records = np.stack([drive(8860.0), drive(8920.0), drive(8920.0)])[None].astype(np.float32)
+
+    class Scan:
+        amplitudes = np.array([1e-8])
+        cylinders = np.array([1, 2, 3])
+        done = np.ones((1, 3), np.uint8)
+        f_center_Hz = 8920.0
+        sample_rate_Hz = rate
+
+    Scan.drive = records  # type: ignore[attr-defined]
+    assert input_frequency_Hz(Scan()) == pytest.approx([8920.0], abs=5.0)  # type: ignore[arg-type]
