@@ -107,3 +107,14 @@ def test_the_input_frequency_is_the_median_of_the_drive_records() -> None:
 
     Scan.drive = records  # type: ignore[attr-defined]
     assert input_frequency_Hz(Scan()) == pytest.approx([8920.0], abs=5.0)  # type: ignore[arg-type]
+
+
+def test_a_far_end_at_the_noise_floor_counts_as_measured_for_the_sweep_figures(
+    small_sweep: Path, tmp_path: Path
+) -> None:
+    """Its output peak is not given, but the point was measured: the sweep and regime figures
+    are drawn (they were left out: "far cylinder 31 measured at 1 amplitude(s)")."""
+    from analysis.report import write_figures
+
+    report = write_figures(read_run(small_sweep), tmp_path)
+    assert {"amplitude_sweep", "regime"} <= set(report.figures), report.skipped
