@@ -19,9 +19,13 @@ and nowhere else. Layout (see the design notes)::
         drive         [A, C, S] float32, V (sim/dem: the applied drive in its own unit, attr units)
                       (velocity and drive: one chunk a point, each with a Fletcher-32 checksum
                       that HDF5 checks at every read; files before 2026-11-27 have none)
-        done          [A, C] uint8: 0 pending, 1 measured and flushed, 2 failed
+        done          [A, C] uint8: 0 pending, 1 measured and flushed, 2 failed (attr codes
+                      says so)
         measured_at   [A, C] float64, unix time (NaN until measured)
-    /log              (time, level, message) rows, resizable
+        fail_reason   [A, C] str: why a failed point failed (its last attempt's error, one
+                      line); empty for the others
+    /log              (time, level, message) rows, resizable; attrs time_units (s since the
+                      unix epoch, UTC) and description
     /simulation       (optional) attrs of the DEM behind the data: integrator, order, dt_s (s),
                       error_estimate_rel (step-doubling estimate of the velocity error, relative
                       L2, worst cylinder; worst run), work_not_in_chain_rel (the fraction
@@ -31,6 +35,10 @@ and nowhere else. Layout (see the design notes)::
                       bench dem_runs_json: a JSON list with one entry per DEM run (direction,
                       kind, amplitude and its units, the same indicators). ``biafc simulate``
                       writes them at creation; the run engine when the file closes.
+
+Fields added after the first files (files before 2026-11-28 lack them; readers take them as
+empty, and a ``--resume`` creates them, empty for the points measured before): ``fail_reason``,
+the ``codes`` of ``done``, the attributes of ``/log``.
 
 The same file is valid NeXus, so NeXus readers (nexusformat, silx, h5web) open it with axes and
 units, without changing the layout above: the root is an ``NXroot`` whose ``default`` is
@@ -108,6 +116,14 @@ class PointState:
     PENDING = 0
     DONE = 1
     FAILED = 2
+
+
+#: the meaning of the ``done`` codes, as the dataset's attribute ``codes`` states it
+DONE_CODES = "0 not measured, 1 done (measured and flushed), 2 failed (reason in fail_reason)"
+
+#: the ``/log`` table's columns and the unit of its time, as its attributes state them
+LOG_DESCRIPTION = "one row per event: time, level (debug|info|warning|error), message"
+LOG_TIME_UNITS = "s since the unix epoch (UTC)"
 
 
 class RunFileError(ValueError):
@@ -189,6 +205,8 @@ class ScanData:
     cycles: float | None
     width_s: float | None
     averages: int
+    #: [A, C] str: why each failed point failed, empty when it did not (or the file is older)
+    fail_reason: NDArray[np.object_]
 
     @property
     def sample_rate_Hz(self) -> float:
@@ -312,6 +330,7 @@ class RunFileWriter:
                 cls._create_scan(scan_root, spec)
             _nexus_entry(f, scans, dict(snapshot or {}))
             f.create_dataset("log", shape=(0,), maxshape=(None,), dtype=_LOG_DTYPE, chunks=(64,))
+            _require_file_fields(f)
             if simulation:
                 sim = f.create_group("simulation")
                 for key, value in simulation.items():
@@ -370,6 +389,7 @@ class RunFileWriter:
         g.create_dataset("done", shape=(A, C), dtype=np.uint8, fillvalue=0)
         m = g.create_dataset("measured_at", shape=(A, C), dtype=np.float64, fillvalue=np.nan)
         m.attrs["units"] = "s since the unix epoch"
+        _require_point_fields(g)
 
     @classmethod
     def open_existing(
@@ -382,13 +402,18 @@ class RunFileWriter:
     ) -> RunFileWriter:
         """Re-open an interrupted run file to append points (``--resume``); ``extra_attrs``
         are set on the root before SWMR starts. ``resumed``: stamp the root's ``resumed``
-        time (not for a repair, which measures nothing)."""
+        time (not for a repair, which measures nothing) and give a file written before them
+        the fields added to the layout since (empty: nothing is known of its earlier points)."""
         path = Path(path)
         _check_format(path)
         f = h5py.File(path, "r+", libver="latest")
         f.attrs["status"] = "running"
         if resumed:
             f.attrs["resumed"] = _now_iso()
+            _require_file_fields(f)
+            for g in f["scan"].values():
+                if isinstance(g, h5py.Group) and "done" in g:
+                    _require_point_fields(g)
         for key, value in (extra_attrs or {}).items():
             f.attrs[key] = value
         f.flush()
@@ -432,7 +457,10 @@ class RunFileWriter:
         g["measured_at"][amplitude_index, cylinder_index] = (
             time.time() if measured_at is None else measured_at
         )
-        g["done"][amplitude_index, cylinder_index] = PointState.DONE
+        done = g["done"]
+        if done[amplitude_index, cylinder_index] == PointState.FAILED and "fail_reason" in g:
+            g["fail_reason"][amplitude_index, cylinder_index] = ""  # measured now: no failure
+        done[amplitude_index, cylinder_index] = PointState.DONE
         self._f.flush()
 
     def clear_point(self, direction: str, amplitude_index: int, cylinder_index: int) -> None:
@@ -447,12 +475,21 @@ class RunFileWriter:
             ds.flush()
         g["measured_at"][amplitude_index, cylinder_index] = np.nan
         g["done"][amplitude_index, cylinder_index] = PointState.PENDING
+        if "fail_reason" in g:
+            g["fail_reason"][amplitude_index, cylinder_index] = ""
         self._f.flush()
 
-    def mark_failed(self, direction: str, amplitude_index: int, cylinder_index: int) -> None:
-        """Mark a point that failed after its retries (``done`` = 2) and flush."""
+    def mark_failed(
+        self, direction: str, amplitude_index: int, cylinder_index: int, reason: str = ""
+    ) -> None:
+        """Mark a point that failed after its retries (``done`` = 2), keep ``reason`` (one
+        line: its last attempt's error) in ``fail_reason`` where the file has it, and flush."""
         self._check_usable()
-        self._f["scan"][direction]["done"][amplitude_index, cylinder_index] = PointState.FAILED
+        g = self._f["scan"][direction]
+        if "fail_reason" in g:
+            line = (reason.splitlines() or [""])[0]
+            g["fail_reason"][amplitude_index, cylinder_index] = line[:1000]
+        g["done"][amplitude_index, cylinder_index] = PointState.FAILED
         self._f.flush()
 
     def attrs_json(self, name: str) -> Any:
@@ -591,6 +628,25 @@ def _burst_cycles_and_width(spec: ScanSpec) -> tuple[float, float]:
         return float("nan"), float("nan")
     b = Burst(spec.f_center_Hz, cycles=spec.cycles, width_s=None if spec.cycles else spec.width_s)
     return b.duration_s * b.f_center_Hz, b.sigma_s
+
+
+def _require_point_fields(g: h5py.Group) -> None:
+    """The per-point fields of scan ``g`` added to the layout after its first files, created
+    where absent (a file re-opened to resume): ``fail_reason``, and the ``codes`` of
+    ``done``."""
+    A, C = g["done"].shape
+    g["done"].attrs["codes"] = DONE_CODES
+    if "fail_reason" not in g:
+        r = g.create_dataset("fail_reason", shape=(A, C), dtype=h5py.string_dtype("utf-8"))
+        r.attrs["long_name"] = "why the point failed (its last attempt's error); empty if not"
+
+
+def _require_file_fields(f: h5py.File) -> None:
+    """The file-wide fields added to the layout after its first files, set where absent:
+    the ``/log`` table's description and time unit."""
+    if "log" in f:
+        f["log"].attrs["description"] = LOG_DESCRIPTION
+        f["log"].attrs["time_units"] = LOG_TIME_UNITS
 
 
 def _nexus_entry(f: h5py.File, scans: Sequence[ScanSpec], snapshot: dict[str, Any]) -> None:
@@ -742,6 +798,16 @@ def _read_records(path: Path, direction: str, g: h5py.Group, name: str) -> np.nd
     )
 
 
+def _strings(g: h5py.Group, name: str) -> NDArray[np.object_]:
+    """The string dataset ``name`` of scan ``g`` ([A, C] of str), or empty strings where the
+    file has none (written before it was in the layout)."""
+    if name in g:
+        if g.file.swmr_mode:
+            g[name].refresh()
+        return np.asarray(g[name].asstr()[...], dtype=object)
+    return np.full(g["done"].shape, "", dtype=object)
+
+
 def _read_run(path: Path, f: h5py.File) -> RunData:
     attrs = _attr_dict(f)
     snapshot = json.loads(f["snapshot"].attrs.get("json", "{}"))
@@ -777,6 +843,7 @@ def _read_run(path: Path, f: h5py.File) -> RunData:
             cycles=_opt(g.attrs.get("cycles", np.nan)),
             width_s=_opt(g.attrs.get("width_s", np.nan)),
             averages=int(g.attrs.get("averages", 1)),
+            fail_reason=_strings(g, "fail_reason"),
         )
     log_ds = f["log"]
     if f.swmr_mode:

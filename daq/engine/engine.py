@@ -805,7 +805,9 @@ class RunEngine:
                 **self._point_data(point, attempt),
             )
             return True
-        self._writer.mark_failed(point.direction, point.amplitude_index, point.cylinder_index)
+        self._writer.mark_failed(
+            point.direction, point.amplitude_index, point.cylinder_index, reason=last
+        )
         self._log(
             "error",
             f"{point.direction} A{point.amplitude_index + 1} cyl {point.cylinder} "

@@ -1,0 +1,73 @@
+"""A run file read with plain h5py, as a physicist would a year later without this software:
+what the ``done`` codes mean, the unit of the log's time, why a point failed, the instruments'
+settings after they were set up (not only at creation), the vibrometer sensitivity and the
+decoder delay of every point, and the history of the resumes."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from daq.engine import RunEngine
+from protocols.runfile import PointState, read_run
+
+from .fakes import FakeWorld, Faults, fake_bench
+
+
+def _run(protocol, bench, out, world=None, **kw):  # type: ignore[no-untyped-def]
+    eng = RunEngine(protocol, bench, fake_bench(world or FakeWorld()), out, **kw)
+    return eng.run()
+
+
+def test_done_codes_log_time_unit_and_each_failed_points_reason_are_in_the_file(
+    protocol, bench, out: Path
+) -> None:
+    res = _run(protocol, bench, out, FakeWorld(faults=Faults(nan_reads=3)))
+    assert res.status == "failed" and res.n_failed == 1
+    with h5py.File(out, "r") as f:
+        done = f["scan/ltr/done"]
+        assert done.attrs["codes"].startswith("0 not measured, 1 done")
+        assert "2 failed" in done.attrs["codes"]
+        assert "unix epoch" in f["log"].attrs["time_units"]
+        assert "UTC" in f["log"].attrs["time_units"]
+        reason = f["scan/ltr/fail_reason"].asstr()[...]
+        assert reason.shape == done.shape
+        assert "NaN" in reason[0, 0], reason[0, 0]
+        assert not any(reason.flat[1:]) and not any(f["scan/rtl/fail_reason"].asstr()[...].flat)
+    scan = read_run(out).scans["ltr"]
+    assert scan.done[0, 0] == PointState.FAILED and "NaN" in scan.fail_reason[0, 0]
+
+
+def test_a_failed_point_measured_at_a_resume_loses_its_reason(protocol, bench, out) -> None:
+    _run(protocol, bench, out, FakeWorld(faults=Faults(nan_reads=3)))
+    assert _run(protocol, bench, out, resume=True).status == "complete"
+    scan = read_run(out).scans["ltr"]
+    assert np.all(scan.done == PointState.DONE) and not any(scan.fail_reason.flat)
+
+
+def _as_an_old_file(path: Path) -> None:
+    """Strip from ``path`` the fields added to the layout after the first files."""
+    with h5py.File(path, "r+") as f:
+        for d in ("ltr", "rtl"):
+            g = f["scan"][d]
+            for name in ("fail_reason",):
+                if name in g:
+                    del g[name]
+            g["done"].attrs.pop("codes", None)
+        for key in ("time_units", "description"):
+            f["log"].attrs.pop(key, None)
+
+
+def test_a_file_without_the_new_fields_reads_and_resumes(protocol, bench, out: Path) -> None:
+    _run(protocol, bench, out, FakeWorld(faults=Faults(stall_on_move=7)))
+    _as_an_old_file(out)
+    old = read_run(out)
+    assert old.scans["ltr"].fail_reason.shape == (2, 3) and not any(
+        old.scans["ltr"].fail_reason.flat
+    )
+    assert _run(protocol, bench, out, resume=True).status == "complete"
+    with h5py.File(out, "r") as f:
+        assert "codes" in f["scan/ltr/done"].attrs and "time_units" in f["log"].attrs
+        assert f["scan/rtl/fail_reason"].shape == (2, 3)
