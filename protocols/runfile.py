@@ -15,7 +15,10 @@ and nowhere else. Layout (see the design notes)::
         amplitudes    [A] float64, attr units
         cylinders     [C] int32, 1-based
         time          [S] float64, s from the trigger
-        velocity      [A, C, S] float32, m/s, mean over averages; NaN until measured
+        velocity      [A, C, S] float32, m/s, mean over averages; NaN until measured; run
+                      engine: attrs decoder_delay_undone_s (s, at the run's start) and
+                      decoder_delay_note: the decoder output lags the velocity by its signal
+                      delay, undone (shifted earlier, band-limited) before storing
         drive         [A, C, S] float32, V (sim/dem: the applied drive in its own unit, attr units)
                       (velocity and drive: one chunk a point, each with a Fletcher-32 checksum
                       that HDF5 checks at every read; files before 2026-11-27 have none)
@@ -24,6 +27,11 @@ and nowhere else. Layout (see the design notes)::
         measured_at   [A, C] float64, unix time (NaN until measured)
         fail_reason   [A, C] str: why a failed point failed (its last attempt's error, one
                       line); empty for the others
+        sensitivity_m_per_s_per_V  [A, C] float64, m/s per V: the vibrometer sensitivity
+                      (its range) each point's volts were scaled by; NaN where not measured
+                      or not a vibrometer's (dem)
+        decoder_delay_undone_s     [A, C] float64, s: the decoder delay undone in each
+                      point (per point: a resume may run on another range); NaN likewise
     /log              (time, level, message) rows, resizable; attrs time_units (s since the
                       unix epoch, UTC) and description
     /simulation       (optional) attrs of the DEM behind the data: integrator, order, dt_s (s),
@@ -37,8 +45,9 @@ and nowhere else. Layout (see the design notes)::
                       writes them at creation; the run engine when the file closes.
 
 Fields added after the first files (files before 2026-11-28 lack them; readers take them as
-empty, and a ``--resume`` creates them, empty for the points measured before): ``fail_reason``,
-the ``codes`` of ``done``, the attributes of ``/log``.
+empty or NaN, and a ``--resume`` creates them, empty for the points measured before):
+``fail_reason``, ``sensitivity_m_per_s_per_V``, ``decoder_delay_undone_s`` (dataset and
+attribute), the ``codes`` of ``done``, the attributes of ``/log``.
 
 The same file is valid NeXus, so NeXus readers (nexusformat, silx, h5web) open it with axes and
 units, without changing the layout above: the root is an ``NXroot`` whose ``default`` is
@@ -121,6 +130,23 @@ class PointState:
 #: the meaning of the ``done`` codes, as the dataset's attribute ``codes`` states it
 DONE_CODES = "0 not measured, 1 done (measured and flushed), 2 failed (reason in fail_reason)"
 
+#: what the velocity's attribute ``decoder_delay_undone_s`` means
+DECODER_DELAY_NOTE = (
+    "the vibrometer decoder's output lags the velocity by its signal delay; each record was "
+    "shifted earlier by it (band-limited) before storing, so that it lines up with the drive. "
+    "decoder_delay_undone_s: the delay at the run's start (s); per point in the dataset "
+    "decoder_delay_undone_s beside this one (a resume may run on another range)"
+)
+
+#: the per-point float datasets ([A, C], NaN until measured): name -> (units, long_name)
+POINT_VALUES = {
+    "sensitivity_m_per_s_per_V": (
+        "m/s/V",
+        "vibrometer sensitivity the point's volts were scaled by (its range)",
+    ),
+    "decoder_delay_undone_s": ("s", "decoder signal delay undone in the point's velocity"),
+}
+
 #: the ``/log`` table's columns and the unit of its time, as its attributes state them
 LOG_DESCRIPTION = "one row per event: time, level (debug|info|warning|error), message"
 LOG_TIME_UNITS = "s since the unix epoch (UTC)"
@@ -185,6 +211,9 @@ class ScanSpec:
     width_s: float | None = None
     averages: int = 1
     drive_units: str = "V"
+    #: the decoder delay (s) undone in the velocity records at the run's start; ``None``: no
+    #: vibrometer (the model's velocity), no attribute
+    decoder_delay_undone_s: float | None = None
 
 
 @dataclass
@@ -207,6 +236,10 @@ class ScanData:
     averages: int
     #: [A, C] str: why each failed point failed, empty when it did not (or the file is older)
     fail_reason: NDArray[np.object_]
+    #: [A, C] the vibrometer sensitivity (m/s per V) and the decoder delay undone (s) of each
+    #: point; NaN where not measured, not a vibrometer's, or the file is older
+    sensitivity_m_per_s_per_V: NDArray[np.float64]
+    decoder_delay_undone_s: NDArray[np.float64]
 
     @property
     def sample_rate_Hz(self) -> float:
@@ -386,6 +419,9 @@ class RunFileWriter:
                                   chunks=(1, 1, S), fletcher32=True)  # fmt: skip
             ds.attrs["units"] = units
             ds.attrs["long_name"] = long_name
+        if spec.decoder_delay_undone_s is not None:
+            g["velocity"].attrs["decoder_delay_undone_s"] = float(spec.decoder_delay_undone_s)
+            g["velocity"].attrs["decoder_delay_note"] = DECODER_DELAY_NOTE
         g.create_dataset("done", shape=(A, C), dtype=np.uint8, fillvalue=0)
         m = g.create_dataset("measured_at", shape=(A, C), dtype=np.float64, fillvalue=np.nan)
         m.attrs["units"] = "s since the unix epoch"
@@ -430,8 +466,13 @@ class RunFileWriter:
         velocity: NDArray[np.floating[Any]],
         drive: NDArray[np.floating[Any]],
         measured_at: float | None = None,
+        *,
+        sensitivity_m_per_s_per_V: float | None = None,
+        decoder_delay_undone_s: float | None = None,
     ) -> None:
         """Store one point (0-based indices), mark it done and flush. Shapes ``[S]``.
+        ``sensitivity_m_per_s_per_V`` and ``decoder_delay_undone_s``: what the velocity was
+        made with (a vibrometer's), kept per point where given.
 
         The records are flushed before the point is marked done: HDF5 writes a chunk when it
         leaves the chunk cache, and a write that fails there (a full disk) is reported nowhere
@@ -457,6 +498,12 @@ class RunFileWriter:
         g["measured_at"][amplitude_index, cylinder_index] = (
             time.time() if measured_at is None else measured_at
         )
+        for name, value in (
+            ("sensitivity_m_per_s_per_V", sensitivity_m_per_s_per_V),
+            ("decoder_delay_undone_s", decoder_delay_undone_s),
+        ):
+            if value is not None and name in g:
+                g[name][amplitude_index, cylinder_index] = value
         done = g["done"]
         if done[amplitude_index, cylinder_index] == PointState.FAILED and "fail_reason" in g:
             g["fail_reason"][amplitude_index, cylinder_index] = ""  # measured now: no failure
@@ -474,6 +521,9 @@ class RunFileWriter:
             ds[amplitude_index, cylinder_index, :] = np.full(ds.shape[2], np.nan, np.float32)
             ds.flush()
         g["measured_at"][amplitude_index, cylinder_index] = np.nan
+        for name in POINT_VALUES:
+            if name in g:
+                g[name][amplitude_index, cylinder_index] = np.nan
         g["done"][amplitude_index, cylinder_index] = PointState.PENDING
         if "fail_reason" in g:
             g["fail_reason"][amplitude_index, cylinder_index] = ""
@@ -632,10 +682,15 @@ def _burst_cycles_and_width(spec: ScanSpec) -> tuple[float, float]:
 
 def _require_point_fields(g: h5py.Group) -> None:
     """The per-point fields of scan ``g`` added to the layout after its first files, created
-    where absent (a file re-opened to resume): ``fail_reason``, and the ``codes`` of
-    ``done``."""
+    where absent (a file re-opened to resume): ``fail_reason``, the per-point values
+    (:data:`POINT_VALUES`) and the ``codes`` of ``done``."""
     A, C = g["done"].shape
     g["done"].attrs["codes"] = DONE_CODES
+    for name, (units, long_name) in POINT_VALUES.items():
+        if name not in g:
+            ds = g.create_dataset(name, shape=(A, C), dtype=np.float64, fillvalue=np.nan)
+            ds.attrs["units"] = units
+            ds.attrs["long_name"] = long_name
     if "fail_reason" not in g:
         r = g.create_dataset("fail_reason", shape=(A, C), dtype=h5py.string_dtype("utf-8"))
         r.attrs["long_name"] = "why the point failed (its last attempt's error); empty if not"
@@ -798,6 +853,16 @@ def _read_records(path: Path, direction: str, g: h5py.Group, name: str) -> np.nd
     )
 
 
+def _point_values(g: h5py.Group, name: str) -> NDArray[np.float64]:
+    """The per-point float dataset ``name`` of scan ``g`` ([A, C]), or NaN where the file has
+    none (written before it was in the layout)."""
+    if name in g:
+        if g.file.swmr_mode:
+            g[name].refresh()
+        return np.asarray(g[name][...], dtype=np.float64)
+    return np.full(g["done"].shape, np.nan)
+
+
 def _strings(g: h5py.Group, name: str) -> NDArray[np.object_]:
     """The string dataset ``name`` of scan ``g`` ([A, C] of str), or empty strings where the
     file has none (written before it was in the layout)."""
@@ -844,6 +909,8 @@ def _read_run(path: Path, f: h5py.File) -> RunData:
             width_s=_opt(g.attrs.get("width_s", np.nan)),
             averages=int(g.attrs.get("averages", 1)),
             fail_reason=_strings(g, "fail_reason"),
+            sensitivity_m_per_s_per_V=_point_values(g, "sensitivity_m_per_s_per_V"),
+            decoder_delay_undone_s=_point_values(g, "decoder_delay_undone_s"),
         )
     log_ds = f["log"]
     if f.swmr_mode:

@@ -209,6 +209,7 @@ class RunEngine:
         self._thread: threading.Thread | None = None
         self._writer: RunFileWriter | None = None
         self._tail = 0  # samples read past each record's window (_configure_digitiser)
+        self._delay_s: float | None = None  # the decoder's delay (_configure_digitiser)
         self.result: RunResult | None = None
         #: True once the run is putting the bench in its safe state and closing the file
         self.ending = False
@@ -317,6 +318,7 @@ class RunEngine:
                     width_s=b.width_s,
                     averages=proto.averages,
                     drive_units="V",
+                    decoder_delay_undone_s=self._delay_s,
                 )
             )
         return specs
@@ -545,6 +547,7 @@ class RunEngine:
         # samples past the window, so that undoing the decoder's delay reads measured data
         # to the window's last sample (decoder_delay.tail_samples)
         delay = float(self._ask("vibrometer", inst.vibrometer.signal_delay_s))
+        self._delay_s = delay
         self._tail = tail_samples(delay, cfg.sample_rate_Hz)
         n_window = cfg.n_samples
         cfg = dataclasses.replace(cfg, n_samples=n_window + self._tail)
@@ -784,7 +787,7 @@ class RunEngine:
                 raise _Aborted()
             self._emit(EventKind.POINT_STARTED, "", **self._point_data(point, attempt))
             try:
-                velocity, drive = self._acquire(point, time_s)
+                velocity, drive, sens, delay = self._acquire(point, time_s)
             except (InstrumentTimeout, SignalLostError, PointCheckError) as exc:
                 last = f"{type(exc).__name__}: {exc}"
                 self._log(
@@ -794,7 +797,13 @@ class RunEngine:
                 )
                 continue
             self._writer.write_point(
-                point.direction, point.amplitude_index, point.cylinder_index, velocity, drive
+                point.direction,
+                point.amplitude_index,
+                point.cylinder_index,
+                velocity,
+                drive,
+                sensitivity_m_per_s_per_V=sens,
+                decoder_delay_undone_s=delay,
             )
             self._emit(
                 EventKind.POINT_DONE,
@@ -838,9 +847,10 @@ class RunEngine:
 
     def _acquire(
         self, point: Point, time_s: NDArray[np.float64]
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], float, float]:
         """Move, settle, check the signal, take ``averages`` records; velocity (m/s) and drive
-        (V), each ``[S]``."""
+        (V), each ``[S]``, and the vibrometer's sensitivity (m/s per V) and decoder delay (s)
+        they were made with."""
         proto, bench, inst = self.protocol_file.protocol, self.bench_file.bench, self.instruments
         ask = self._ask
         ask("stage", inst.stage.move_to, point.position_m)
@@ -887,4 +897,4 @@ class RunEngine:
         if delay != 0.0:  # the decoder output lags: v_true(t) = v_out(t + delay)
             v_mean = undo_decoder_delay(v_mean, self._rate_Hz, delay)
         n = time_s.shape[0]
-        return v_mean[:n], d_sum[:n] / proto.averages
+        return v_mean[:n], d_sum[:n] / proto.averages, sens, delay

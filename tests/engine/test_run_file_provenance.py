@@ -9,10 +9,12 @@ from pathlib import Path
 
 import h5py
 import numpy as np
+import pytest
 
 from daq.engine import RunEngine
 from protocols.runfile import PointState, read_run
 
+from . import fakes
 from .fakes import FakeWorld, Faults, fake_bench
 
 
@@ -52,10 +54,12 @@ def _as_an_old_file(path: Path) -> None:
     with h5py.File(path, "r+") as f:
         for d in ("ltr", "rtl"):
             g = f["scan"][d]
-            for name in ("fail_reason",):
+            for name in ("fail_reason", "sensitivity_m_per_s_per_V", "decoder_delay_undone_s"):
                 if name in g:
                     del g[name]
             g["done"].attrs.pop("codes", None)
+            for key in ("decoder_delay_undone_s", "decoder_delay_note"):
+                g["velocity"].attrs.pop(key, None)
         for key in ("time_units", "description"):
             f["log"].attrs.pop(key, None)
 
@@ -71,3 +75,38 @@ def test_a_file_without_the_new_fields_reads_and_resumes(protocol, bench, out: P
     with h5py.File(out, "r") as f:
         assert "codes" in f["scan/ltr/done"].attrs and "time_units" in f["log"].attrs
         assert f["scan/rtl/fail_reason"].shape == (2, 3)
+        # 7 points before (all of ltr, the first of rtl): unknown; the resume's: known
+        assert np.all(np.isnan(f["scan/ltr/sensitivity_m_per_s_per_V"][...]))
+        sens = f["scan/rtl/sensitivity_m_per_s_per_V"][...].ravel()
+        assert np.isnan(sens[0]) and np.all(sens[1:] == fakes.SENS)
+        assert "decoder_delay_undone_s" not in f["scan/ltr/velocity"].attrs  # not known then
+    scan = read_run(out).scans["rtl"]
+    assert np.isnan(scan.decoder_delay_undone_s[0, 0]) and scan.decoder_delay_undone_s[1, 0] > 0
+
+
+def test_each_points_sensitivity_and_the_decoder_delay_undone_are_in_the_file(
+    protocol, bench, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The sensitivity and the decoder delay were read at every point and kept nowhere: a
+    resume on another vibrometer range left no trace of which points it scaled."""
+    out = tmp_path / "run.h5"
+    _run(protocol, bench, out, FakeWorld(faults=Faults(stall_on_move=7)))
+    monkeypatch.setattr(fakes, "SENS", 0.125)  # resumed on another range
+    monkeypatch.setattr(fakes, "DELAY_S", 7.3e-6)
+    assert _run(protocol, bench, out, resume=True).status == "complete"
+    with h5py.File(out, "r") as f:
+        v = f["scan/ltr/velocity"]
+        assert v.attrs["decoder_delay_undone_s"] == 20e-6  # at the start
+        assert "undone" in v.attrs["decoder_delay_note"]
+        ltr, rtl = f["scan/ltr"], f["scan/rtl"]
+        assert ltr["sensitivity_m_per_s_per_V"].attrs["units"] == "m/s/V"
+        assert ltr["decoder_delay_undone_s"].attrs["units"] == "s"
+        sens = np.concatenate([ltr["sensitivity_m_per_s_per_V"][...].ravel(),
+                               rtl["sensitivity_m_per_s_per_V"][...].ravel()])  # fmt: skip
+        delay = np.concatenate([ltr["decoder_delay_undone_s"][...].ravel(),
+                                rtl["decoder_delay_undone_s"][...].ravel()])  # fmt: skip
+    # order: direction, amplitude, cylinder; 7 points before the stall, 5 after the resume
+    assert list(sens) == [0.05] * 7 + [0.125] * 5
+    assert list(delay) == [20e-6] * 7 + [7.3e-6] * 5
+    scan = read_run(out).scans["rtl"]
+    assert scan.sensitivity_m_per_s_per_V[1, 2] == 0.125
