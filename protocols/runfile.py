@@ -6,7 +6,15 @@ and nowhere else. Layout (see the design notes)::
 
     /                 attrs: format="biafc-run", format_version=1, created, software_version,
                              backend ("sim"|"hardware"|"dem"), status, protocol_yaml, bench_yaml
-    /snapshot         attr json: every instrument's snapshot() at start
+    /snapshot         attr json: every instrument's snapshot() at start (when the file is
+                      created, before any burst is set up or the stage homed)
+        armed         (run engine) rows (time, direction, amplitude_index, amplitude, json):
+                      every instrument's snapshot() again each time the generator was set up
+                      for a direction and amplitude, json as /snapshot's: the burst as the
+                      generator read it back (Vpp, offset, sample rate, load), the
+                      vibrometer's range, sensitivity and delay then; a resume adds rows
+                      (the first one after it shows what the resume ran with). time: unix s
+                      (UTC); amplitude_index: 0-based row of the direction's amplitudes
     /chain            lengths_m [N], onset_Hz [N, B], cutoff_Hz [N, B];
                       attrs diameter_m, f0_N, beta_c
     /scan/<direction> NXdata (signal=velocity, axes=[amplitudes, cylinders, time]);
@@ -47,7 +55,7 @@ and nowhere else. Layout (see the design notes)::
 Fields added after the first files (files before 2026-11-28 lack them; readers take them as
 empty or NaN, and a ``--resume`` creates them, empty for the points measured before):
 ``fail_reason``, ``sensitivity_m_per_s_per_V``, ``decoder_delay_undone_s`` (dataset and
-attribute), the ``codes`` of ``done``, the attributes of ``/log``.
+attribute), ``/snapshot/armed``, the ``codes`` of ``done``, the attributes of ``/log``.
 
 The same file is valid NeXus, so NeXus readers (nexusformat, silx, h5web) open it with axes and
 units, without changing the layout above: the root is an ``NXroot`` whose ``default`` is
@@ -260,6 +268,9 @@ class RunData:
     scans: dict[str, ScanData]
     log: list[tuple[float, str, str]] = field(default_factory=list)
     simulation: dict[str, Any] = field(default_factory=dict)
+    #: ``/snapshot/armed``: each a dict of time, direction, amplitude_index, amplitude and
+    #: snapshot (empty for a file without it)
+    armed_snapshots: list[dict[str, Any]] = field(default_factory=list)
 
     @property
     def status(self) -> str:
@@ -276,6 +287,24 @@ _LOG_DTYPE = np.dtype(
         ("level", h5py.string_dtype("utf-8")),
         ("message", h5py.string_dtype("utf-8")),
     ]
+)
+
+
+_ARMED_DTYPE = np.dtype(
+    [
+        ("time", np.float64),
+        ("direction", h5py.string_dtype("utf-8")),
+        ("amplitude_index", np.int32),
+        ("amplitude", np.float64),
+        ("json", h5py.string_dtype("utf-8")),
+    ]
+)
+
+ARMED_DESCRIPTION = (
+    "every instrument's snapshot() (json, as /snapshot's) each time the generator was set up "
+    "for a direction and amplitude: the burst as it read it back and the vibrometer's range "
+    "then; a resume adds rows. /snapshot's own json is the one at creation, before any set-up. "
+    "amplitude_index: 0-based row of /scan/<direction>/amplitudes"
 )
 
 
@@ -542,6 +571,29 @@ class RunFileWriter:
         g["done"][amplitude_index, cylinder_index] = PointState.FAILED
         self._f.flush()
 
+    def add_snapshot(
+        self,
+        direction: str,
+        amplitude_index: int,
+        amplitude: float,
+        snapshot: Mapping[str, Any],
+        when: float | None = None,
+    ) -> None:
+        """Append a row to ``/snapshot/armed`` (the instruments as set up for ``direction``
+        and amplitude ``amplitude_index``, 0-based) and flush; nothing in a file without it."""
+        self._check_usable()
+        if "armed" not in self._f["snapshot"]:
+            return
+        ds = self._f["snapshot"]["armed"]
+        n = ds.shape[0]
+        ds.resize((n + 1,))
+        row = np.zeros(1, dtype=_ARMED_DTYPE)
+        text = json.dumps(dict(snapshot), default=str, sort_keys=True)
+        t = time.time() if when is None else when
+        row[0] = (t, direction, amplitude_index, amplitude, text)
+        ds[n] = row[0]
+        self._f.flush()
+
     def attrs_json(self, name: str) -> Any:
         """A root attribute holding JSON, decoded (``None`` when absent)."""
         v = self._f.attrs.get(name)
@@ -698,10 +750,17 @@ def _require_point_fields(g: h5py.Group) -> None:
 
 def _require_file_fields(f: h5py.File) -> None:
     """The file-wide fields added to the layout after its first files, set where absent:
-    the ``/log`` table's description and time unit."""
+    the ``/log`` table's description and time unit, the ``/snapshot/armed`` table."""
     if "log" in f:
         f["log"].attrs["description"] = LOG_DESCRIPTION
         f["log"].attrs["time_units"] = LOG_TIME_UNITS
+    snap = f.require_group("snapshot")
+    if "armed" not in snap:
+        ds = snap.create_dataset(
+            "armed", shape=(0,), maxshape=(None,), dtype=_ARMED_DTYPE, chunks=(16,)
+        )
+        ds.attrs["description"] = ARMED_DESCRIPTION
+        ds.attrs["time_units"] = LOG_TIME_UNITS
 
 
 def _nexus_entry(f: h5py.File, scans: Sequence[ScanSpec], snapshot: dict[str, Any]) -> None:
@@ -924,4 +983,27 @@ def _read_run(path: Path, f: h5py.File) -> RunData:
         for r in log_ds[...]
     ]
     simulation = _attr_dict(f["simulation"]) if "simulation" in f else {}
-    return RunData(path, attrs, snapshot, chain, scans, log, simulation)
+    return RunData(path, attrs, snapshot, chain, scans, log, simulation, _armed(f))
+
+
+def _armed(f: h5py.File) -> list[dict[str, Any]]:
+    """The rows of ``/snapshot/armed`` (none in a file without it)."""
+    if "armed" not in f["snapshot"]:
+        return []
+    ds = f["snapshot"]["armed"]
+    if f.swmr_mode:
+        ds.refresh()
+
+    def text(v: Any) -> str:
+        return v.decode() if isinstance(v, bytes) else str(v)
+
+    return [
+        {
+            "time": float(r["time"]),
+            "direction": text(r["direction"]),
+            "amplitude_index": int(r["amplitude_index"]),
+            "amplitude": float(r["amplitude"]),
+            "snapshot": json.loads(text(r["json"])),
+        }
+        for r in ds[...]
+    ]

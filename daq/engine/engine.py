@@ -500,10 +500,12 @@ class RunEngine:
             "dem_runs_json": json.dumps(runs, default=float),
         }
 
-    def _snapshot(self) -> dict[str, Any]:
+    def _snapshot(self, *, with_model: bool = True) -> dict[str, Any]:
         """Every instrument's ``snapshot()``, what each reports when asked now (``read_back``:
         identity, outputs, decoder range and sensitivity, stage position, digitiser rate) and,
-        on the simulated bench, the model's parameters (``simulation_model``)."""
+        on the simulated bench with ``with_model``, the model's parameters
+        (``simulation_model``; at creation only: a resume's other bench is recorded in
+        ``bench_overrides_json``)."""
         inst = self.instruments
         snap = inst.snapshot()
         gen, vib, stage = inst.generator, inst.vibrometer, inst.stage
@@ -532,7 +534,7 @@ class RunEngine:
                     read_back[name][key] = f"error: {exc}"
         read_back["digitiser"] = {"sample_rate_Hz": getattr(self, "_rate_Hz", None)}
         snap["read_back"] = read_back
-        config = getattr(inst.world, "config", None)
+        config = getattr(inst.world, "config", None) if with_model else None
         if config is not None:
             snap["simulation_model"] = _jsonable(config)
         return snap
@@ -760,11 +762,17 @@ class RunEngine:
         errs = gen.errors()
         if errs:
             raise InstrumentError(f"generator reported: {'; '.join(errs)}")
+        # the instruments as set up now (the burst read back, the vibrometer's range): the
+        # file's /snapshot is taken at creation, before any of it, and a resume takes none
+        snap = self._snapshot(with_model=False)
+        gen_snap = snap.get("generator")
         self._log(
             "info",
             f"generator channel {ch}: {point.direction} burst {point.generator_Vpp:.4g} Vpp"
-            + _held_text(gen.snapshot(), ch),
+            + _held_text(gen_snap if isinstance(gen_snap, dict) else {}, ch),
         )
+        if self._writer is not None:
+            self._writer.add_snapshot(point.direction, point.amplitude_index, point.amplitude, snap)
 
     def _point_data(self, point: Point, attempt: int) -> dict[str, Any]:
         return {

@@ -5,6 +5,7 @@ decoder delay of every point, and the history of the resumes."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import h5py
@@ -62,18 +63,23 @@ def _as_an_old_file(path: Path) -> None:
                 g["velocity"].attrs.pop(key, None)
         for key in ("time_units", "description"):
             f["log"].attrs.pop(key, None)
+        if "armed" in f["snapshot"]:
+            del f["snapshot/armed"]
 
 
 def test_a_file_without_the_new_fields_reads_and_resumes(protocol, bench, out: Path) -> None:
     _run(protocol, bench, out, FakeWorld(faults=Faults(stall_on_move=7)))
     _as_an_old_file(out)
     old = read_run(out)
+    assert old.armed_snapshots == []
     assert old.scans["ltr"].fail_reason.shape == (2, 3) and not any(
         old.scans["ltr"].fail_reason.flat
     )
     assert _run(protocol, bench, out, resume=True).status == "complete"
     with h5py.File(out, "r") as f:
         assert "codes" in f["scan/ltr/done"].attrs and "time_units" in f["log"].attrs
+        armed = f["snapshot/armed"]["direction"]
+        assert [d.decode() for d in armed] == ["rtl", "rtl"]  # the resume's armings
         assert f["scan/rtl/fail_reason"].shape == (2, 3)
         # 7 points before (all of ltr, the first of rtl): unknown; the resume's: known
         assert np.all(np.isnan(f["scan/ltr/sensitivity_m_per_s_per_V"][...]))
@@ -110,3 +116,49 @@ def test_each_points_sensitivity_and_the_decoder_delay_undone_are_in_the_file(
     assert list(delay) == [20e-6] * 7 + [7.3e-6] * 5
     scan = read_run(out).scans["rtl"]
     assert scan.sensitivity_m_per_s_per_V[1, 2] == 0.125
+
+
+def test_the_instruments_as_set_up_are_kept_at_every_arming_and_after_a_resume(
+    protocol, bench, out: Path
+) -> None:
+    """/snapshot was taken once, at creation, before the generator was set up, and a resume
+    took none: after a resume on another vibrometer range the file still named the first."""
+    from protocols.bench import parse_bench
+
+    _run(protocol, bench, out, FakeWorld(faults=Faults(stall_on_move=7)))
+    other = parse_bench(bench.text.replace("VD-09 50mm/s/V", "VD-09 10mm/s/V"), "other.yaml")
+    res = _run(protocol, other, out, resume=True, accept_bench_change=True)
+    assert res.status == "complete", res.reason
+    with h5py.File(out, "r") as f:
+        first = f["snapshot"].attrs["json"]
+        armed = f["snapshot/armed"]
+        assert "snapshot()" in armed.attrs["description"]
+        assert "unix epoch" in armed.attrs["time_units"]
+        rows = armed[...]
+    # ltr A1, ltr A2, rtl A1 before the stall; rtl A1 again and rtl A2 after the resume
+    said = [(r["direction"].decode(), int(r["amplitude_index"])) for r in rows]
+    assert said == [("ltr", 0), ("ltr", 1), ("rtl", 0), ("rtl", 0), ("rtl", 1)]
+    assert list(rows["amplitude"]) == [1.0, 2.0, 1.0, 1.0, 2.0]
+    assert np.all(np.diff(rows["time"]) >= 0)
+    ranges = [json.loads(r["json"])["read_back"]["vibrometer"]["range"] for r in rows]
+    assert ranges == ["VD-09 50mm/s/V"] * 3 + ["VD-09 10mm/s/V"] * 2
+    assert json.loads(first)["read_back"]["vibrometer"]["range"] == "VD-09 50mm/s/V"  # kept
+    snaps = read_run(out).armed_snapshots
+    assert [s["direction"] for s in snaps] == ["ltr", "ltr", "rtl", "rtl", "rtl"]
+    assert snaps[-1]["snapshot"]["vibrometer"] == {"range": "VD-09 10mm/s/V"}
+
+
+def test_the_generators_read_back_burst_reaches_the_file_on_the_simulated_bench(
+    tmp_path: Path,
+) -> None:
+    from daq.cli import run_protocol as rp
+
+    smoke = Path(__file__).resolve().parents[2] / "protocols" / "smoke.yaml"
+    out = tmp_path / "smoke.h5"
+    assert rp.main([str(smoke), "--out", str(out), "--quiet"]) == 0
+    run = read_run(out)
+    assert "read_back" not in run.snapshot["generator"]["channels"]["1"]  # before any set-up
+    held = [s["snapshot"]["generator"]["channels"]["1"]["read_back"] for s in run.armed_snapshots]
+    assert len(held) == 2 and all(h["load_ohm"] for h in held)
+    assert 0 < held[0]["amplitude_Vpp"] < held[1]["amplitude_Vpp"]  # 0.5 um, then 3 um
+    assert held[0]["sample_rate_Hz"] > 0
