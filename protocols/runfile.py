@@ -5,7 +5,14 @@ simulated bench, the analysis and the GUI) goes through this module, so the layo
 and nowhere else. Layout (see the design notes)::
 
     /                 attrs: format="biafc-run", format_version=1, created, software_version,
-                             backend ("sim"|"hardware"|"dem"), status, protocol_yaml, bench_yaml
+                             backend ("sim"|"hardware"|"dem"), status, protocol_yaml, bench_yaml;
+                      time stamps (created, started, resumed: the last resume, finished)
+                      ISO 8601 in UTC, "2026-11-28T13:58:46+00:00"; run engine, at a resume:
+                      resumes_json, a JSON list with one entry per resume (started, the
+                      software and host as at creation, seed, and bench_yaml: the bench text
+                      it ran with, only where it differs from the root's), and with
+                      --accept-bench-change bench_overrides_json, one entry per accepted
+                      change (time, differences, bench_yaml)
     /snapshot         attr json: every instrument's snapshot() at start (when the file is
                       created, before any burst is set up or the stage homed)
         armed         (run engine) rows (time, direction, amplitude_index, amplitude, json):
@@ -110,6 +117,7 @@ __all__ = [
     "RunFileWriter",
     "ScanData",
     "ScanSpec",
+    "now_iso",
     "one_line_errors",
     "open_for_reading",
     "pending_points",
@@ -308,7 +316,9 @@ ARMED_DESCRIPTION = (
 )
 
 
-def _now_iso() -> str:
+def now_iso() -> str:
+    """Now, as every time stamp of a run file is written: ISO 8601 in UTC, to the second
+    (``"2026-11-28T13:58:46+00:00"``)."""
     return datetime.now(UTC).isoformat(timespec="seconds")
 
 
@@ -365,12 +375,12 @@ class RunFileWriter:
         try:
             f.attrs["format"] = FORMAT
             f.attrs["format_version"] = FORMAT_VERSION
-            f.attrs["created"] = _now_iso()
+            f.attrs["created"] = now_iso()
             f.attrs["software_version"] = software_version()
             f.attrs["host"] = socket.gethostname()
             f.attrs["backend"] = backend
             f.attrs["status"] = "running"
-            f.attrs["started"] = _now_iso()
+            f.attrs["started"] = now_iso()
             f.attrs["protocol_yaml"] = protocol_yaml
             f.attrs["bench_yaml"] = bench_yaml
             for key, value in (extra_attrs or {}).items():
@@ -474,7 +484,7 @@ class RunFileWriter:
         f = h5py.File(path, "r+", libver="latest")
         f.attrs["status"] = "running"
         if resumed:
-            f.attrs["resumed"] = _now_iso()
+            f.attrs["resumed"] = now_iso()
             _require_file_fields(f)
             for g in f["scan"].values():
                 if isinstance(g, h5py.Group) and "done" in g:
@@ -638,7 +648,7 @@ class RunFileWriter:
             self._closed = True
             with open_to_finish(self.path) as f:  # waits for readers following the run
                 f.attrs["status"] = status
-                f.attrs[stamp] = _now_iso()
+                f.attrs[stamp] = now_iso()
                 if simulation:
                     sim = f.require_group("simulation")
                     for key, value in simulation.items():

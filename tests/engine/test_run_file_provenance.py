@@ -162,3 +162,39 @@ def test_the_generators_read_back_burst_reaches_the_file_on_the_simulated_bench(
     assert len(held) == 2 and all(h["load_ohm"] for h in held)
     assert 0 < held[0]["amplitude_Vpp"] < held[1]["amplitude_Vpp"]  # 0.5 um, then 3 um
     assert held[0]["sample_rate_Hz"] > 0
+
+
+def _stamp_ok(text: str) -> bool:
+    """ISO 8601 in UTC, to the second, as the root's ``created``: 2026-11-28T13:58:46+00:00."""
+    from datetime import datetime, timedelta
+
+    t = datetime.fromisoformat(text)
+    return text.endswith("+00:00") and len(text) == 25 and t.utcoffset() == timedelta(0)
+
+
+def test_each_resume_keeps_its_start_and_the_bench_text_it_ran_with(
+    protocol, bench, out: Path
+) -> None:
+    """resumes_json entries had no time (the root's ``resumed`` keeps only the last) and the
+    bench text of a resume was kept only for the differences the resume check compares."""
+    from protocols.bench import parse_bench
+
+    stall = {"faults": Faults(stall_on_move=3)}
+    _run(protocol, bench, out, FakeWorld(**stall))
+    # 1: the same bench; 2: another name only (not compared, not refused); 3: another range
+    renamed = parse_bench(bench.text.replace(f"name: {bench.bench.name}", "name: bench B"), "b")
+    assert renamed.text != bench.text
+    ranged = parse_bench(bench.text.replace("VD-09 50mm/s/V", "VD-09 10mm/s/V"), "c")
+    assert _run(protocol, bench, out, FakeWorld(**stall), resume=True).status == "failed"
+    assert _run(protocol, renamed, out, FakeWorld(**stall), resume=True).status == "failed"
+    res = _run(protocol, ranged, out, resume=True, accept_bench_change=True)
+    assert res.status == "complete", res.reason
+    with h5py.File(out, "r") as f:
+        root = {k: f.attrs[k] for k in ("created", "started", "resumed", "finished")}
+        resumes = json.loads(f.attrs["resumes_json"])
+        overrides = json.loads(f.attrs["bench_overrides_json"])
+    assert all(_stamp_ok(v) for v in root.values()), root
+    assert len(resumes) == 3 and all(_stamp_ok(r["started"]) for r in resumes)
+    assert resumes[-1]["started"] == root["resumed"]
+    assert [r.get("bench_yaml") for r in resumes] == [None, renamed.text, ranged.text]
+    assert _stamp_ok(overrides[0]["time"]) and overrides[0]["time"] == resumes[-1]["started"]
