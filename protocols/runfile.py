@@ -59,10 +59,12 @@ and nowhere else. Layout (see the design notes)::
                       kind, amplitude and its units, the same indicators). ``biafc simulate``
                       writes them at creation; the run engine when the file closes.
 
-Fields added after the first files (files before 2026-11-28 lack them; readers take them as
-empty or NaN, and a ``--resume`` creates them, empty for the points measured before):
-``fail_reason``, ``sensitivity_m_per_s_per_V``, ``decoder_delay_undone_s`` (dataset and
-attribute), ``/snapshot/armed``, the ``codes`` of ``done``, the attributes of ``/log``.
+Fields added after the first files (files before 2026-11-28 lack them, and readers take them
+as empty, NaN or no rows): ``fail_reason``, ``sensitivity_m_per_s_per_V``,
+``decoder_delay_undone_s`` (dataset and velocity attribute), ``/snapshot/armed``, the ``codes``
+of ``done``, the attributes of ``/log``, ``started`` in ``resumes_json``. A ``--resume`` of
+such a file creates them, empty (NaN) for the points measured before it; the velocity's
+decoder-delay attributes stay absent there (the earlier points' delay is not known).
 
 The same file is valid NeXus, so NeXus readers (nexusformat, silx, h5web) open it with axes and
 units, without changing the layout above: the root is an ``NXroot`` whose ``default`` is
