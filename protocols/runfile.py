@@ -5,8 +5,23 @@ simulated bench, the analysis and the GUI) goes through this module, so the layo
 and nowhere else. Layout (see the design notes)::
 
     /                 attrs: format="biafc-run", format_version=1, created, software_version,
-                             backend ("sim"|"hardware"|"dem"), status, protocol_yaml, bench_yaml
-    /snapshot         attr json: every instrument's snapshot() at start
+                             backend ("sim"|"hardware"|"dem"), status, protocol_yaml, bench_yaml;
+                      time stamps (created, started, resumed: the last resume, finished)
+                      ISO 8601 in UTC, "2026-11-28T13:58:46+00:00"; run engine, at a resume:
+                      resumes_json, a JSON list with one entry per resume (started, the
+                      software and host as at creation, seed, and bench_yaml: the bench text
+                      it ran with, only where it differs from the root's), and with
+                      --accept-bench-change bench_overrides_json, one entry per accepted
+                      change (time, differences, bench_yaml)
+    /snapshot         attr json: every instrument's snapshot() at start (when the file is
+                      created, before any burst is set up or the stage homed)
+        armed         (run engine) rows (time, direction, amplitude_index, amplitude, json):
+                      every instrument's snapshot() again each time the generator was set up
+                      for a direction and amplitude, json as /snapshot's: the burst as the
+                      generator read it back (Vpp, offset, sample rate, load), the
+                      vibrometer's range, sensitivity and delay then; a resume adds rows
+                      (the first one after it shows what the resume ran with). time: unix s
+                      (UTC); amplitude_index: 0-based row of the direction's amplitudes
     /chain            lengths_m [N], onset_Hz [N, B], cutoff_Hz [N, B];
                       attrs diameter_m, f0_N, beta_c
     /scan/<direction> NXdata (signal=velocity, axes=[amplitudes, cylinders, time]);
@@ -15,13 +30,25 @@ and nowhere else. Layout (see the design notes)::
         amplitudes    [A] float64, attr units
         cylinders     [C] int32, 1-based
         time          [S] float64, s from the trigger
-        velocity      [A, C, S] float32, m/s, mean over averages; NaN until measured
+        velocity      [A, C, S] float32, m/s, mean over averages; NaN until measured; run
+                      engine: attrs decoder_delay_undone_s (s, at the run's start) and
+                      decoder_delay_note: the decoder output lags the velocity by its signal
+                      delay, undone (shifted earlier, band-limited) before storing
         drive         [A, C, S] float32, V (sim/dem: the applied drive in its own unit, attr units)
                       (velocity and drive: one chunk a point, each with a Fletcher-32 checksum
                       that HDF5 checks at every read; files before 2026-11-27 have none)
-        done          [A, C] uint8: 0 pending, 1 measured and flushed, 2 failed
+        done          [A, C] uint8: 0 pending, 1 measured and flushed, 2 failed (attr codes
+                      says so)
         measured_at   [A, C] float64, unix time (NaN until measured)
-    /log              (time, level, message) rows, resizable
+        fail_reason   [A, C] str: why a failed point failed (its last attempt's error, one
+                      line); empty for the others
+        sensitivity_m_per_s_per_V  [A, C] float64, m/s per V: the vibrometer sensitivity
+                      (its range) each point's volts were scaled by; NaN where not measured
+                      or not a vibrometer's (dem)
+        decoder_delay_undone_s     [A, C] float64, s: the decoder delay undone in each
+                      point (per point: a resume may run on another range); NaN likewise
+    /log              (time, level, message) rows, resizable; attrs time_units (s since the
+                      unix epoch, UTC) and description
     /simulation       (optional) attrs of the DEM behind the data: integrator, order, dt_s (s),
                       error_estimate_rel (step-doubling estimate of the velocity error, relative
                       L2, worst cylinder; worst run), work_not_in_chain_rel (the fraction
@@ -31,6 +58,13 @@ and nowhere else. Layout (see the design notes)::
                       bench dem_runs_json: a JSON list with one entry per DEM run (direction,
                       kind, amplitude and its units, the same indicators). ``biafc simulate``
                       writes them at creation; the run engine when the file closes.
+
+Fields added after the first files (files before 2026-11-28 lack them, and readers take them
+as empty, NaN or no rows): ``fail_reason``, ``sensitivity_m_per_s_per_V``,
+``decoder_delay_undone_s`` (dataset and velocity attribute), ``/snapshot/armed``, the ``codes``
+of ``done``, the attributes of ``/log``, ``started`` in ``resumes_json``. A ``--resume`` of
+such a file creates them, empty (NaN) for the points measured before it; the velocity's
+decoder-delay attributes stay absent there (the earlier points' delay is not known).
 
 The same file is valid NeXus, so NeXus readers (nexusformat, silx, h5web) open it with axes and
 units, without changing the layout above: the root is an ``NXroot`` whose ``default`` is
@@ -85,6 +119,7 @@ __all__ = [
     "RunFileWriter",
     "ScanData",
     "ScanSpec",
+    "now_iso",
     "one_line_errors",
     "open_for_reading",
     "pending_points",
@@ -108,6 +143,31 @@ class PointState:
     PENDING = 0
     DONE = 1
     FAILED = 2
+
+
+#: the meaning of the ``done`` codes, as the dataset's attribute ``codes`` states it
+DONE_CODES = "0 not measured, 1 done (measured and flushed), 2 failed (reason in fail_reason)"
+
+#: what the velocity's attribute ``decoder_delay_undone_s`` means
+DECODER_DELAY_NOTE = (
+    "the vibrometer decoder's output lags the velocity by its signal delay; each record was "
+    "shifted earlier by it (band-limited) before storing, so that it lines up with the drive. "
+    "decoder_delay_undone_s: the delay at the run's start (s); per point in the dataset "
+    "decoder_delay_undone_s beside this one (a resume may run on another range)"
+)
+
+#: the per-point float datasets ([A, C], NaN until measured): name -> (units, long_name)
+POINT_VALUES = {
+    "sensitivity_m_per_s_per_V": (
+        "m/s/V",
+        "vibrometer sensitivity the point's volts were scaled by (its range)",
+    ),
+    "decoder_delay_undone_s": ("s", "decoder signal delay undone in the point's velocity"),
+}
+
+#: the ``/log`` table's columns and the unit of its time, as its attributes state them
+LOG_DESCRIPTION = "one row per event: time, level (debug|info|warning|error), message"
+LOG_TIME_UNITS = "s since the unix epoch (UTC)"
 
 
 class RunFileError(ValueError):
@@ -169,6 +229,9 @@ class ScanSpec:
     width_s: float | None = None
     averages: int = 1
     drive_units: str = "V"
+    #: the decoder delay (s) undone in the velocity records at the run's start; ``None``: no
+    #: vibrometer (the model's velocity), no attribute
+    decoder_delay_undone_s: float | None = None
 
 
 @dataclass
@@ -189,6 +252,12 @@ class ScanData:
     cycles: float | None
     width_s: float | None
     averages: int
+    #: [A, C] str: why each failed point failed, empty when it did not (or the file is older)
+    fail_reason: NDArray[np.object_]
+    #: [A, C] the vibrometer sensitivity (m/s per V) and the decoder delay undone (s) of each
+    #: point; NaN where not measured, not a vibrometer's, or the file is older
+    sensitivity_m_per_s_per_V: NDArray[np.float64]
+    decoder_delay_undone_s: NDArray[np.float64]
 
     @property
     def sample_rate_Hz(self) -> float:
@@ -209,6 +278,9 @@ class RunData:
     scans: dict[str, ScanData]
     log: list[tuple[float, str, str]] = field(default_factory=list)
     simulation: dict[str, Any] = field(default_factory=dict)
+    #: ``/snapshot/armed``: each a dict of time, direction, amplitude_index, amplitude and
+    #: snapshot (empty for a file without it)
+    armed_snapshots: list[dict[str, Any]] = field(default_factory=list)
 
     @property
     def status(self) -> str:
@@ -228,7 +300,27 @@ _LOG_DTYPE = np.dtype(
 )
 
 
-def _now_iso() -> str:
+_ARMED_DTYPE = np.dtype(
+    [
+        ("time", np.float64),
+        ("direction", h5py.string_dtype("utf-8")),
+        ("amplitude_index", np.int32),
+        ("amplitude", np.float64),
+        ("json", h5py.string_dtype("utf-8")),
+    ]
+)
+
+ARMED_DESCRIPTION = (
+    "every instrument's snapshot() (json, as /snapshot's) each time the generator was set up "
+    "for a direction and amplitude: the burst as it read it back and the vibrometer's range "
+    "then; a resume adds rows. /snapshot's own json is the one at creation, before any set-up. "
+    "amplitude_index: 0-based row of /scan/<direction>/amplitudes"
+)
+
+
+def now_iso() -> str:
+    """Now, as every time stamp of a run file is written: ISO 8601 in UTC, to the second
+    (``"2026-11-28T13:58:46+00:00"``)."""
     return datetime.now(UTC).isoformat(timespec="seconds")
 
 
@@ -285,12 +377,12 @@ class RunFileWriter:
         try:
             f.attrs["format"] = FORMAT
             f.attrs["format_version"] = FORMAT_VERSION
-            f.attrs["created"] = _now_iso()
+            f.attrs["created"] = now_iso()
             f.attrs["software_version"] = software_version()
             f.attrs["host"] = socket.gethostname()
             f.attrs["backend"] = backend
             f.attrs["status"] = "running"
-            f.attrs["started"] = _now_iso()
+            f.attrs["started"] = now_iso()
             f.attrs["protocol_yaml"] = protocol_yaml
             f.attrs["bench_yaml"] = bench_yaml
             for key, value in (extra_attrs or {}).items():
@@ -312,6 +404,7 @@ class RunFileWriter:
                 cls._create_scan(scan_root, spec)
             _nexus_entry(f, scans, dict(snapshot or {}))
             f.create_dataset("log", shape=(0,), maxshape=(None,), dtype=_LOG_DTYPE, chunks=(64,))
+            _require_file_fields(f)
             if simulation:
                 sim = f.create_group("simulation")
                 for key, value in simulation.items():
@@ -367,9 +460,13 @@ class RunFileWriter:
                                   chunks=(1, 1, S), fletcher32=True)  # fmt: skip
             ds.attrs["units"] = units
             ds.attrs["long_name"] = long_name
+        if spec.decoder_delay_undone_s is not None:
+            g["velocity"].attrs["decoder_delay_undone_s"] = float(spec.decoder_delay_undone_s)
+            g["velocity"].attrs["decoder_delay_note"] = DECODER_DELAY_NOTE
         g.create_dataset("done", shape=(A, C), dtype=np.uint8, fillvalue=0)
         m = g.create_dataset("measured_at", shape=(A, C), dtype=np.float64, fillvalue=np.nan)
         m.attrs["units"] = "s since the unix epoch"
+        _require_point_fields(g)
 
     @classmethod
     def open_existing(
@@ -382,13 +479,18 @@ class RunFileWriter:
     ) -> RunFileWriter:
         """Re-open an interrupted run file to append points (``--resume``); ``extra_attrs``
         are set on the root before SWMR starts. ``resumed``: stamp the root's ``resumed``
-        time (not for a repair, which measures nothing)."""
+        time (not for a repair, which measures nothing) and give a file written before them
+        the fields added to the layout since (empty: nothing is known of its earlier points)."""
         path = Path(path)
         _check_format(path)
         f = h5py.File(path, "r+", libver="latest")
         f.attrs["status"] = "running"
         if resumed:
-            f.attrs["resumed"] = _now_iso()
+            f.attrs["resumed"] = now_iso()
+            _require_file_fields(f)
+            for g in f["scan"].values():
+                if isinstance(g, h5py.Group) and "done" in g:
+                    _require_point_fields(g)
         for key, value in (extra_attrs or {}).items():
             f.attrs[key] = value
         f.flush()
@@ -405,8 +507,13 @@ class RunFileWriter:
         velocity: NDArray[np.floating[Any]],
         drive: NDArray[np.floating[Any]],
         measured_at: float | None = None,
+        *,
+        sensitivity_m_per_s_per_V: float | None = None,
+        decoder_delay_undone_s: float | None = None,
     ) -> None:
         """Store one point (0-based indices), mark it done and flush. Shapes ``[S]``.
+        ``sensitivity_m_per_s_per_V`` and ``decoder_delay_undone_s``: what the velocity was
+        made with (a vibrometer's), kept per point where given.
 
         The records are flushed before the point is marked done: HDF5 writes a chunk when it
         leaves the chunk cache, and a write that fails there (a full disk) is reported nowhere
@@ -432,7 +539,16 @@ class RunFileWriter:
         g["measured_at"][amplitude_index, cylinder_index] = (
             time.time() if measured_at is None else measured_at
         )
-        g["done"][amplitude_index, cylinder_index] = PointState.DONE
+        for name, value in (
+            ("sensitivity_m_per_s_per_V", sensitivity_m_per_s_per_V),
+            ("decoder_delay_undone_s", decoder_delay_undone_s),
+        ):
+            if value is not None and name in g:
+                g[name][amplitude_index, cylinder_index] = value
+        done = g["done"]
+        if done[amplitude_index, cylinder_index] == PointState.FAILED and "fail_reason" in g:
+            g["fail_reason"][amplitude_index, cylinder_index] = ""  # measured now: no failure
+        done[amplitude_index, cylinder_index] = PointState.DONE
         self._f.flush()
 
     def clear_point(self, direction: str, amplitude_index: int, cylinder_index: int) -> None:
@@ -446,13 +562,48 @@ class RunFileWriter:
             ds[amplitude_index, cylinder_index, :] = np.full(ds.shape[2], np.nan, np.float32)
             ds.flush()
         g["measured_at"][amplitude_index, cylinder_index] = np.nan
+        for name in POINT_VALUES:
+            if name in g:
+                g[name][amplitude_index, cylinder_index] = np.nan
         g["done"][amplitude_index, cylinder_index] = PointState.PENDING
+        if "fail_reason" in g:
+            g["fail_reason"][amplitude_index, cylinder_index] = ""
         self._f.flush()
 
-    def mark_failed(self, direction: str, amplitude_index: int, cylinder_index: int) -> None:
-        """Mark a point that failed after its retries (``done`` = 2) and flush."""
+    def mark_failed(
+        self, direction: str, amplitude_index: int, cylinder_index: int, reason: str = ""
+    ) -> None:
+        """Mark a point that failed after its retries (``done`` = 2), keep ``reason`` (one
+        line: its last attempt's error) in ``fail_reason`` where the file has it, and flush."""
         self._check_usable()
-        self._f["scan"][direction]["done"][amplitude_index, cylinder_index] = PointState.FAILED
+        g = self._f["scan"][direction]
+        if "fail_reason" in g:
+            line = (reason.splitlines() or [""])[0]
+            g["fail_reason"][amplitude_index, cylinder_index] = line[:1000]
+        g["done"][amplitude_index, cylinder_index] = PointState.FAILED
+        self._f.flush()
+
+    def add_snapshot(
+        self,
+        direction: str,
+        amplitude_index: int,
+        amplitude: float,
+        snapshot: Mapping[str, Any],
+        when: float | None = None,
+    ) -> None:
+        """Append a row to ``/snapshot/armed`` (the instruments as set up for ``direction``
+        and amplitude ``amplitude_index``, 0-based) and flush; nothing in a file without it."""
+        self._check_usable()
+        if "armed" not in self._f["snapshot"]:
+            return
+        ds = self._f["snapshot"]["armed"]
+        n = ds.shape[0]
+        ds.resize((n + 1,))
+        row = np.zeros(1, dtype=_ARMED_DTYPE)
+        text = json.dumps(dict(snapshot), default=str, sort_keys=True)
+        t = time.time() if when is None else when
+        row[0] = (t, direction, amplitude_index, amplitude, text)
+        ds[n] = row[0]
         self._f.flush()
 
     def attrs_json(self, name: str) -> Any:
@@ -499,7 +650,7 @@ class RunFileWriter:
             self._closed = True
             with open_to_finish(self.path) as f:  # waits for readers following the run
                 f.attrs["status"] = status
-                f.attrs[stamp] = _now_iso()
+                f.attrs[stamp] = now_iso()
                 if simulation:
                     sim = f.require_group("simulation")
                     for key, value in simulation.items():
@@ -591,6 +742,37 @@ def _burst_cycles_and_width(spec: ScanSpec) -> tuple[float, float]:
         return float("nan"), float("nan")
     b = Burst(spec.f_center_Hz, cycles=spec.cycles, width_s=None if spec.cycles else spec.width_s)
     return b.duration_s * b.f_center_Hz, b.sigma_s
+
+
+def _require_point_fields(g: h5py.Group) -> None:
+    """The per-point fields of scan ``g`` added to the layout after its first files, created
+    where absent (a file re-opened to resume): ``fail_reason``, the per-point values
+    (:data:`POINT_VALUES`) and the ``codes`` of ``done``."""
+    A, C = g["done"].shape
+    g["done"].attrs["codes"] = DONE_CODES
+    for name, (units, long_name) in POINT_VALUES.items():
+        if name not in g:
+            ds = g.create_dataset(name, shape=(A, C), dtype=np.float64, fillvalue=np.nan)
+            ds.attrs["units"] = units
+            ds.attrs["long_name"] = long_name
+    if "fail_reason" not in g:
+        r = g.create_dataset("fail_reason", shape=(A, C), dtype=h5py.string_dtype("utf-8"))
+        r.attrs["long_name"] = "why the point failed (its last attempt's error); empty if not"
+
+
+def _require_file_fields(f: h5py.File) -> None:
+    """The file-wide fields added to the layout after its first files, set where absent:
+    the ``/log`` table's description and time unit, the ``/snapshot/armed`` table."""
+    if "log" in f:
+        f["log"].attrs["description"] = LOG_DESCRIPTION
+        f["log"].attrs["time_units"] = LOG_TIME_UNITS
+    snap = f.require_group("snapshot")
+    if "armed" not in snap:
+        ds = snap.create_dataset(
+            "armed", shape=(0,), maxshape=(None,), dtype=_ARMED_DTYPE, chunks=(16,)
+        )
+        ds.attrs["description"] = ARMED_DESCRIPTION
+        ds.attrs["time_units"] = LOG_TIME_UNITS
 
 
 def _nexus_entry(f: h5py.File, scans: Sequence[ScanSpec], snapshot: dict[str, Any]) -> None:
@@ -742,6 +924,26 @@ def _read_records(path: Path, direction: str, g: h5py.Group, name: str) -> np.nd
     )
 
 
+def _point_values(g: h5py.Group, name: str) -> NDArray[np.float64]:
+    """The per-point float dataset ``name`` of scan ``g`` ([A, C]), or NaN where the file has
+    none (written before it was in the layout)."""
+    if name in g:
+        if g.file.swmr_mode:
+            g[name].refresh()
+        return np.asarray(g[name][...], dtype=np.float64)
+    return np.full(g["done"].shape, np.nan)
+
+
+def _strings(g: h5py.Group, name: str) -> NDArray[np.object_]:
+    """The string dataset ``name`` of scan ``g`` ([A, C] of str), or empty strings where the
+    file has none (written before it was in the layout)."""
+    if name in g:
+        if g.file.swmr_mode:
+            g[name].refresh()
+        return np.asarray(g[name].asstr()[...], dtype=object)
+    return np.full(g["done"].shape, "", dtype=object)
+
+
 def _read_run(path: Path, f: h5py.File) -> RunData:
     attrs = _attr_dict(f)
     snapshot = json.loads(f["snapshot"].attrs.get("json", "{}"))
@@ -777,6 +979,9 @@ def _read_run(path: Path, f: h5py.File) -> RunData:
             cycles=_opt(g.attrs.get("cycles", np.nan)),
             width_s=_opt(g.attrs.get("width_s", np.nan)),
             averages=int(g.attrs.get("averages", 1)),
+            fail_reason=_strings(g, "fail_reason"),
+            sensitivity_m_per_s_per_V=_point_values(g, "sensitivity_m_per_s_per_V"),
+            decoder_delay_undone_s=_point_values(g, "decoder_delay_undone_s"),
         )
     log_ds = f["log"]
     if f.swmr_mode:
@@ -790,4 +995,27 @@ def _read_run(path: Path, f: h5py.File) -> RunData:
         for r in log_ds[...]
     ]
     simulation = _attr_dict(f["simulation"]) if "simulation" in f else {}
-    return RunData(path, attrs, snapshot, chain, scans, log, simulation)
+    return RunData(path, attrs, snapshot, chain, scans, log, simulation, _armed(f))
+
+
+def _armed(f: h5py.File) -> list[dict[str, Any]]:
+    """The rows of ``/snapshot/armed`` (none in a file without it)."""
+    if "armed" not in f["snapshot"]:
+        return []
+    ds = f["snapshot"]["armed"]
+    if f.swmr_mode:
+        ds.refresh()
+
+    def text(v: Any) -> str:
+        return v.decode() if isinstance(v, bytes) else str(v)
+
+    return [
+        {
+            "time": float(r["time"]),
+            "direction": text(r["direction"]),
+            "amplitude_index": int(r["amplitude_index"]),
+            "amplitude": float(r["amplitude"]),
+            "snapshot": json.loads(text(r["json"])),
+        }
+        for r in ds[...]
+    ]

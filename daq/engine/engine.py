@@ -209,6 +209,7 @@ class RunEngine:
         self._thread: threading.Thread | None = None
         self._writer: RunFileWriter | None = None
         self._tail = 0  # samples read past each record's window (_configure_digitiser)
+        self._delay_s: float | None = None  # the decoder's delay (_configure_digitiser)
         self.result: RunResult | None = None
         #: True once the run is putting the bench in its safe state and closing the file
         self.ending = False
@@ -317,6 +318,7 @@ class RunEngine:
                     width_s=b.width_s,
                     averages=proto.averages,
                     drive_units="V",
+                    decoder_delay_undone_s=self._delay_s,
                 )
             )
         return specs
@@ -498,10 +500,12 @@ class RunEngine:
             "dem_runs_json": json.dumps(runs, default=float),
         }
 
-    def _snapshot(self) -> dict[str, Any]:
+    def _snapshot(self, *, with_model: bool = True) -> dict[str, Any]:
         """Every instrument's ``snapshot()``, what each reports when asked now (``read_back``:
         identity, outputs, decoder range and sensitivity, stage position, digitiser rate) and,
-        on the simulated bench, the model's parameters (``simulation_model``)."""
+        on the simulated bench with ``with_model``, the model's parameters
+        (``simulation_model``; at creation only: a resume's other bench is recorded in
+        ``bench_overrides_json``)."""
         inst = self.instruments
         snap = inst.snapshot()
         gen, vib, stage = inst.generator, inst.vibrometer, inst.stage
@@ -530,7 +534,7 @@ class RunEngine:
                     read_back[name][key] = f"error: {exc}"
         read_back["digitiser"] = {"sample_rate_Hz": getattr(self, "_rate_Hz", None)}
         snap["read_back"] = read_back
-        config = getattr(inst.world, "config", None)
+        config = getattr(inst.world, "config", None) if with_model else None
         if config is not None:
             snap["simulation_model"] = _jsonable(config)
         return snap
@@ -545,6 +549,7 @@ class RunEngine:
         # samples past the window, so that undoing the decoder's delay reads measured data
         # to the window's last sample (decoder_delay.tail_samples)
         delay = float(self._ask("vibrometer", inst.vibrometer.signal_delay_s))
+        self._delay_s = delay
         self._tail = tail_samples(delay, cfg.sample_rate_Hz)
         n_window = cfg.n_samples
         cfg = dataclasses.replace(cfg, n_samples=n_window + self._tail)
@@ -757,11 +762,17 @@ class RunEngine:
         errs = gen.errors()
         if errs:
             raise InstrumentError(f"generator reported: {'; '.join(errs)}")
+        # the instruments as set up now (the burst read back, the vibrometer's range): the
+        # file's /snapshot is taken at creation, before any of it, and a resume takes none
+        snap = self._snapshot(with_model=False)
+        gen_snap = snap.get("generator")
         self._log(
             "info",
             f"generator channel {ch}: {point.direction} burst {point.generator_Vpp:.4g} Vpp"
-            + _held_text(gen.snapshot(), ch),
+            + _held_text(gen_snap if isinstance(gen_snap, dict) else {}, ch),
         )
+        if self._writer is not None:
+            self._writer.add_snapshot(point.direction, point.amplitude_index, point.amplitude, snap)
 
     def _point_data(self, point: Point, attempt: int) -> dict[str, Any]:
         return {
@@ -784,7 +795,7 @@ class RunEngine:
                 raise _Aborted()
             self._emit(EventKind.POINT_STARTED, "", **self._point_data(point, attempt))
             try:
-                velocity, drive = self._acquire(point, time_s)
+                velocity, drive, sens, delay = self._acquire(point, time_s)
             except (InstrumentTimeout, SignalLostError, PointCheckError) as exc:
                 last = f"{type(exc).__name__}: {exc}"
                 self._log(
@@ -794,7 +805,13 @@ class RunEngine:
                 )
                 continue
             self._writer.write_point(
-                point.direction, point.amplitude_index, point.cylinder_index, velocity, drive
+                point.direction,
+                point.amplitude_index,
+                point.cylinder_index,
+                velocity,
+                drive,
+                sensitivity_m_per_s_per_V=sens,
+                decoder_delay_undone_s=delay,
             )
             self._emit(
                 EventKind.POINT_DONE,
@@ -805,7 +822,9 @@ class RunEngine:
                 **self._point_data(point, attempt),
             )
             return True
-        self._writer.mark_failed(point.direction, point.amplitude_index, point.cylinder_index)
+        self._writer.mark_failed(
+            point.direction, point.amplitude_index, point.cylinder_index, reason=last
+        )
         self._log(
             "error",
             f"{point.direction} A{point.amplitude_index + 1} cyl {point.cylinder} "
@@ -836,9 +855,10 @@ class RunEngine:
 
     def _acquire(
         self, point: Point, time_s: NDArray[np.float64]
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], float, float]:
         """Move, settle, check the signal, take ``averages`` records; velocity (m/s) and drive
-        (V), each ``[S]``."""
+        (V), each ``[S]``, and the vibrometer's sensitivity (m/s per V) and decoder delay (s)
+        they were made with."""
         proto, bench, inst = self.protocol_file.protocol, self.bench_file.bench, self.instruments
         ask = self._ask
         ask("stage", inst.stage.move_to, point.position_m)
@@ -885,4 +905,4 @@ class RunEngine:
         if delay != 0.0:  # the decoder output lags: v_true(t) = v_out(t + delay)
             v_mean = undo_decoder_delay(v_mean, self._rate_Hz, delay)
         n = time_s.shape[0]
-        return v_mean[:n], d_sum[:n] / proto.averages
+        return v_mean[:n], d_sum[:n] / proto.averages, sens, delay

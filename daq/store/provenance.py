@@ -7,7 +7,9 @@ Root attributes, plain strings and numbers so that plain h5py (or HDFView) reads
 libraries the data went through). The protocol and bench files as written, each instrument's
 identity and settings read back from it, and the simulated world's model parameters are in
 ``protocol_yaml``, ``bench_yaml`` and ``/snapshot`` (see :meth:`RunEngine` and
-:func:`daq.connect.connect_bench`).
+:func:`daq.connect.connect_bench`); the instruments as set up for each direction and amplitude
+in ``/snapshot/armed``; each resume's own entry in ``resumes_json`` (the layout:
+:mod:`protocols.runfile`).
 """
 
 from __future__ import annotations

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import json
 import os
-import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, Literal
@@ -306,9 +305,12 @@ def resume_run(
     """Re-open ``path`` to continue it with protocol ``pf`` on ``bench``; refused
     (:class:`StoreError`) when the protocol, the bench or the scan axes differ. With
     ``accept_bench_change`` a different bench is accepted and recorded in the file (root
-    attribute ``bench_overrides_json``: a list of {time, differences, bench_yaml}). ``seed``:
-    the simulated bench's seed of this resume, kept in its ``resumes_json`` entry (the root's
-    ``seed`` stays the start's)."""
+    attribute ``bench_overrides_json``: a list of {time, differences, bench_yaml}). Each
+    resume appends an entry to ``resumes_json``: its start time (``started``, the form of the
+    root's time stamps), its provenance, ``seed`` (the simulated bench's seed of this resume;
+    the root's ``seed`` stays the start's) and ``bench_yaml``, the bench text it ran with,
+    whenever that differs from the root's ``bench_yaml`` at all (also where the comparison
+    ignores the difference: names, addresses, the simulated bench's faults)."""
     diffs = check_resume(
         path,
         pf,
@@ -318,26 +320,30 @@ def resume_run(
         n_samples=scans[0].time_s.shape[0] if scans else None,
     )
     from daq.store.provenance import provenance_attrs
-    from protocols.runfile import open_for_reading
+    from protocols.runfile import now_iso, open_for_reading
 
+    keys = ("resumes_json", "bench_overrides_json", "bench_yaml")
     try:
         with open_for_reading(path) as f:
-            prior = {k: f.attrs.get(k, "[]") for k in ("resumes_json", "bench_overrides_json")}
+            prior = {k: f.attrs.get(k, "[]" if k.endswith("_json") else "") for k in keys}
     except OSError as exc:
         raise StoreError(f"--resume: {exc}") from None
     prior = {k: v.decode() if isinstance(v, bytes) else str(v) for k, v in prior.items()}
     extra: dict[str, Any] = {}
+    started = now_iso()
     resumes = json.loads(prior["resumes_json"] or "[]")
-    entry = provenance_attrs()
+    entry: dict[str, Any] = {"started": started, **provenance_attrs()}
     if seed is not None:
         entry["seed"] = int(seed)
+    if bench is not None and bench.text != prior["bench_yaml"]:
+        entry["bench_yaml"] = bench.text
     resumes.append(entry)
     extra["resumes_json"] = json.dumps(resumes)
     if bench is not None and diffs:
         old = json.loads(prior["bench_overrides_json"] or "[]")
         old.append(
             {
-                "time": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+                "time": started,
                 "differences": diffs,
                 "bench_yaml": bench.text,
             }
