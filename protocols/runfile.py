@@ -78,7 +78,11 @@ the NeXus attributes and groups.
 
 Writing uses SWMR and flushes after every point, so a crash loses at most the point in flight
 and a reader can follow a run live. HDF5 forbids changing attributes under SWMR, so the final
-``status`` is written when the writer closes (re-opening the file without SWMR).
+``status`` is written when the writer closes (re-opening the file without SWMR), with the run
+engine's ``outcome``: the words the run's last line begins with ("complete", "finished with
+failed points: ...", "run failed: <reason>", "run aborted: ...", "run UNSAFE: ..."), so that a
+run that failed and one that finished with failed points (both ``status`` "failed") differ in
+the file too. Older files have no ``outcome``.
 """
 
 from __future__ import annotations
@@ -634,9 +638,11 @@ class RunFileWriter:
         *,
         simulation: Mapping[str, Any] | None = None,
         stamp: str = "finished",
+        outcome: str | None = None,
     ) -> None:
         """Close, writing the final ``status`` (and the time, as root attribute ``stamp``:
-        ``finished``, or ``repaired`` for a repair) as root attributes and ``simulation``
+        ``finished``, or ``repaired`` for a repair; and ``outcome`` when given, see the module
+        docstring) as root attributes and ``simulation``
         (optional) as attributes of ``/simulation`` (created if absent; SWMR forbids new
         attributes while writing, so they are set here)."""
         if self._closed:
@@ -651,6 +657,8 @@ class RunFileWriter:
             with open_to_finish(self.path) as f:  # waits for readers following the run
                 f.attrs["status"] = status
                 f.attrs[stamp] = now_iso()
+                if outcome is not None:
+                    f.attrs["outcome"] = outcome
                 if simulation:
                     sim = f.require_group("simulation")
                     for key, value in simulation.items():

@@ -27,6 +27,7 @@ import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -36,6 +37,7 @@ from daq.engine.decoder_delay import tail_samples, undo_decoder_delay
 from daq.engine.events import EventBus, EventKind, RunEvent, RunState, Subscriber
 from daq.engine.instruments import BenchInstruments
 from daq.engine.keep_awake import cannot_line, keep_awake
+from daq.engine.outcome import outcome_text
 from daq.engine.plan import Plan, Point, make_plan, points_left
 from daq.store import create_run, resume_run
 from daq.store.disk_space import DiskFull, room_for_a_point
@@ -422,7 +424,14 @@ class RunEngine:
                     f"failed {self._n_failed_now} (of {self.plan.n_points})",
                 )
                 try:
-                    self._writer.close(status, simulation=self._simulation_attrs())  # type: ignore[arg-type]
+                    ended = SimpleNamespace(
+                        status=status, reason=reason, points_failed_only=points_failed_only
+                    )
+                    self._writer.close(
+                        status,  # type: ignore[arg-type]
+                        simulation=self._simulation_attrs(),
+                        outcome=outcome_text(ended),
+                    )
                 except Exception as exc:  # the file's status is not written: not complete
                     reason = reason or f"closing the run file failed: {exc}"
                     if status == "complete":

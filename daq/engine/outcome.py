@@ -20,7 +20,14 @@ from __future__ import annotations
 from enum import IntEnum
 from typing import Any
 
-__all__ = ["ExitCode", "counts_text", "exit_code", "final_line", "unsafe_instruction"]
+__all__ = [
+    "ExitCode",
+    "counts_text",
+    "exit_code",
+    "final_line",
+    "outcome_text",
+    "unsafe_instruction",
+]
 
 
 class ExitCode(IntEnum):
@@ -85,4 +92,19 @@ def final_line(result: Any) -> str:
             f"complete: {result.n_done} points in {result.wall_s:.1f} s "
             f"({counts_text(result)}){safe} -> {result.path}"
         )
-    return f"run {status}: {result.reason}; {counts_text(result)}{safe} (file {result.path})"
+    return f"{outcome_text(result)}; {counts_text(result)}{safe} (file {result.path})"
+
+
+def outcome_text(result: Any) -> str:
+    """What happened, in the words the file keeps (root attribute ``outcome``) and the last
+    line begins with: ``"complete"``, ``"finished with failed points: ..."`` (exit 4, which
+    the file's ``status`` "failed" shares with a run that failed), ``"run failed: <reason>"``,
+    ``"run aborted: ..."``, ``"run UNSAFE: ..."``."""
+    status = str(result.status)
+    if status == "complete":
+        return "complete"
+    if getattr(result, "points_failed_only", False):
+        return str(result.reason)
+    if status == "unsafe":
+        return f"run UNSAFE: {result.reason}" if result.reason else "run UNSAFE"
+    return f"run {status}: {result.reason}" if result.reason else f"run {status}"

@@ -65,6 +65,7 @@ def test_a_generator_that_stops_answering_ends_unsafe_at_once(protocol, bench, o
     assert gen.queries <= 2  # type: ignore[attr-defined]
     run = read_run(out)
     assert run.status == "unsafe"
+    assert run.attrs["outcome"].startswith("run UNSAFE: safe state not confirmed after the run")
     assert any("SWITCH OFF BY HAND" in m and "output 1" in m for _, _, m in run.log)
 
 
@@ -83,6 +84,7 @@ def test_the_safe_state_is_confirmed_by_reading_the_outputs_back(protocol, bench
     res = RunEngine(protocol, bench, fake_bench(FakeWorld()), out).run()
     assert res.status == "complete" and res.safe_state_s is not None
     assert any("safe state confirmed" in m for _, _, m in read_run(out).log)
+    assert read_run(out).attrs["outcome"] == "complete"
 
 
 def test_a_stage_still_moving_after_stop_is_an_unconfirmed_safe_state(protocol, bench, out) -> None:
@@ -108,7 +110,11 @@ def test_failed_points_are_exit_4_and_a_resume_remeasures_them(
     assert rp.main([str(proto_file), "--out", str(part), "--quiet", "--seed", "4"]) == 4
     last = _last_err(capsys)
     assert "1 of 12 points failed" in last and "--resume" in last
+    # the last line and the file tell it from a run that failed (a second reader: both read
+    # "run failed: ...", and the file held status "failed" only)
+    assert last.startswith("finished with failed points: 1 of 12 points failed")
     assert read_run(part).status == "failed"
+    assert read_run(part).attrs["outcome"].startswith("finished with failed points: 1 of 12")
     # the dry run of the resume says what it will measure, not the whole plan (12 points)
     assert rp.main([str(proto_file), "--resume", str(part), "--dry-run"]) == 0
     assert ": 1 of 12 points to measure, estimated" in capsys.readouterr().out
