@@ -35,6 +35,18 @@ LOGGER = "biafc"
 _FORMAT = "%(asctime)s %(levelname)-7s %(name)s: %(message)s"
 
 
+class _IsoFormatter(logging.Formatter):
+    """Time stamps in ISO 8601 with the zone, to the millisecond
+    ("2026-11-28T15:10:11.123+01:00"): the run file's own stamps are UTC, and a log line in
+    local time without its zone could not be put beside them."""
+
+    def formatTime(self, record: logging.LogRecord, datefmt: str | None = None) -> str:
+        import datetime as dt
+
+        when = dt.datetime.fromtimestamp(record.created).astimezone()
+        return when.isoformat(timespec="milliseconds")
+
+
 class _NotShownElsewhere(logging.Filter):
     """Drops the run engine's warnings and errors: the progress display prints those."""
 
@@ -120,7 +132,7 @@ class HeldRunLog(logging.Handler):
     def __init__(self, path: Path) -> None:
         super().__init__(logging.INFO)
         self.path = path
-        self.setFormatter(logging.Formatter(_FORMAT))
+        self.setFormatter(_IsoFormatter(_FORMAT))
         self._held: list[logging.LogRecord] = []
         self._file: logging.Handler | None = None
 
@@ -170,7 +182,7 @@ def attach_run_log(run_path: str | Path) -> logging.Handler:
     path.parent.mkdir(parents=True, exist_ok=True)
     handler = logging.FileHandler(path, mode="a", encoding="utf-8", delay=False)
     handler.setLevel(logging.INFO)
-    handler.setFormatter(logging.Formatter(_FORMAT))
+    handler.setFormatter(_IsoFormatter(_FORMAT))
     logger.addHandler(handler)
     return handler
 

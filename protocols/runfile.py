@@ -22,7 +22,9 @@ and nowhere else. Layout (see the design notes)::
                       vibrometer's range, sensitivity and delay then; a resume adds rows
                       (the first one after it shows what the resume ran with). time: unix s
                       (UTC); amplitude_index: 0-based row of the direction's amplitudes
-    /chain            lengths_m [N], onset_Hz [N, B], cutoff_Hz [N, B];
+    /chain            lengths_m [N], onset_Hz [N, B], cutoff_Hz [N, B] (attr axes: row n
+                      cylinder n + 1, column b its band b + 1 in rising frequency, onset 0 Hz
+                      for the acoustic band; files before 2026-11-28 have no axes attr);
                       attrs diameter_m, f0_N, beta_c
     /scan/<direction> NXdata (signal=velocity, axes=[amplitudes, cylinders, time]);
                       attrs f_center_Hz, cycles and width_s (the burst's Gaussian sigma,
@@ -139,6 +141,13 @@ DIRECTIONS = ("ltr", "rtl")
 Backend = Literal["sim", "hardware", "dem"]
 Status = Literal["running", "complete", "aborted", "failed", "unsafe"]
 STATUSES = ("running", "complete", "aborted", "failed", "unsafe")
+
+
+#: what the rows and columns of /chain/onset_Hz and /chain/cutoff_Hz are (their attr ``axes``)
+BAND_AXES = (
+    "[N, B]: row n is cylinder n + 1 (from the left end), column b its quasi-band b + 1 in "
+    "rising frequency (onset_Hz to cutoff_Hz); a band whose onset is 0 Hz is the acoustic band"
+)
 
 
 class PointState:
@@ -399,7 +408,10 @@ class RunFileWriter:
                 ("onset_Hz", np.atleast_2d(np.asarray(chain.onset_Hz, float)), "Hz"),
                 ("cutoff_Hz", np.atleast_2d(np.asarray(chain.cutoff_Hz, float)), "Hz"),
             ):
-                g.create_dataset(name, data=data).attrs["units"] = units
+                ds = g.create_dataset(name, data=data)
+                ds.attrs["units"] = units
+                if name != "lengths_m":
+                    ds.attrs["axes"] = BAND_AXES
             g.attrs["diameter_m"] = float(chain.diameter_m)
             g.attrs["f0_N"] = float(chain.f0_N)
             g.attrs["beta_c"] = float(chain.beta_c)

@@ -198,3 +198,23 @@ def test_each_resume_keeps_its_start_and_the_bench_text_it_ran_with(
     assert resumes[-1]["started"] == root["resumed"]
     assert [r.get("bench_yaml") for r in resumes] == [None, renamed.text, ranged.text]
     assert _stamp_ok(overrides[0]["time"]) and overrides[0]["time"] == resumes[-1]["started"]
+
+
+def test_band_columns_are_named_and_the_run_log_stamps_carry_their_zone(tmp_path: Path) -> None:
+    """/chain/onset_Hz [31, 3] did not say what its columns were, and RUN.log's lines were in
+    local time without a zone beside the file's UTC stamps (a second reader)."""
+    import re
+
+    from daq.cli.run_protocol import main as run_protocol
+    from daq.logsetup import log_path_for
+
+    out = tmp_path / "smoke.h5"
+    assert run_protocol(["smoke.yaml", "--out", str(out), "-q"]) == 0
+    with h5py.File(out, "r") as f:
+        for name in ("onset_Hz", "cutoff_Hz"):
+            axes = f["chain"][name].attrs["axes"]
+            assert "row n is cylinder n + 1" in axes and "acoustic band" in axes
+    lines = log_path_for(out).read_text().splitlines()
+    stamp = re.compile(r"^\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\.\d{3}[+-]\d\d:\d\d ")
+    assert lines and all(stamp.match(line) for line in lines if line[:2] == "20"), lines[:2]
+    assert stamp.match(lines[0])
