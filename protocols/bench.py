@@ -349,6 +349,14 @@ class BenchSpec(_Model):
                 )
         if self.simulated and self.simulation is None:
             object.__setattr__(self, "simulation", SimulationSpec())
+        if self.simulated and self.simulation is not None:
+            t_lo, t_hi = self.simulation.stage_travel
+            if low < t_lo or high > t_hi:
+                raise ValueError(
+                    f"stage.soft_limits: {low * 1e3:.4g}..{high * 1e3:.4g} mm reach beyond the "
+                    f"simulated stage's travel {t_lo * 1e3:.4g}..{t_hi * 1e3:.4g} mm "
+                    "(simulation.stage_travel)"
+                )
         return self
 
     def positions_m(self) -> NDArray[np.float64]:
