@@ -105,7 +105,9 @@ def stored_names(study: Study) -> list[str]:
 
 def task_cells(n_cells: int, cells_per_task: int) -> list[NDArray[np.int64]]:
     """The study's tasks: consecutive cell numbers, ``cells_per_task`` each (the last fewer).
-    Fixed by the cell numbers alone, so a task holds the same cells on any run or resume."""
+    Fixed by the cell numbers and ``cells_per_task`` alone; a continued study runs only the
+    cells of each task not done yet (:func:`daq.study_runner.run_study`), so another
+    ``cells_per_task`` than the first run's regroups what is left and runs no cell twice."""
     return [
         np.arange(s, min(s + cells_per_task, n_cells), dtype=np.int64)
         for s in range(0, n_cells, cells_per_task)

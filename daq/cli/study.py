@@ -128,7 +128,10 @@ def _run_to(
     try:
         try:
             if out.exists():
-                store = StudyStore.open(out, digest=digest, table=table)
+                store = StudyStore.open(
+                    out, digest=digest, table=table, n_tasks=len(tasks),
+                    cells_per_task=study.run.cells_per_task,
+                )  # fmt: skip
             else:
                 grid = spectrum_grid_Hz(study) if study.record_spectra else None
                 store = StudyStore.create(
@@ -136,6 +139,7 @@ def _run_to(
                     chain_yaml=chain_yaml, table=table,
                     directions=study.drive.directions, metric_names=stored_names(study),
                     n_tasks=len(tasks), spectrum_freq_Hz=grid,
+                    cells_per_task=study.run.cells_per_task,
                 )  # fmt: skip
         except StudyFileError as exc:
             raise CliError(str(exc)) from None
