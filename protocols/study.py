@@ -88,13 +88,9 @@ class ParameterInfo:
 #: the design parameters a study may vary (name -> info); ``amplitude`` comes from ``drive``
 PARAMETERS: dict[str, ParameterInfo] = {
     "diameter": ParameterInfo("length", "m", "chain", description="cylinder diameter"),
-    "preload": ParameterInfo(
-        "force",
-        "N",
-        "chain",
-        low_open=False,
-        description="static pre-compression F0",
-    ),
+    # > 0 N: at 0 N the contacts have no stiffness and no chain can be built (before, 0 N
+    # was let through and every cell of it failed at run time)
+    "preload": ParameterInfo("force", "N", "chain", description="static pre-compression F0"),
     "length_first": ParameterInfo("length", "m", "chain", description="length of cylinder #1"),
     "length_last": ParameterInfo("length", "m", "chain", description="length of cylinder #N"),
     "n_cylinders": ParameterInfo(

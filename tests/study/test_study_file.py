@@ -108,14 +108,30 @@ def test_a_chain_no_cell_can_have_is_refused_before_any_task(
     p = tmp_path / "s.yaml"
     p.write_text(
         TINY.replace("sampling: grid", "chain: dashpot.yaml\nsampling: grid").replace(
-            "[3 N, 6 N]", "[0 N, 6 N]"
+            "  n_cylinders: 5", "  n_cylinders: 5\n  bending_mode_ratio: [0.002, 1.0]"
         )
     )
     out = tmp_path / "s.h5"
     assert main(["study", str(p), "--workers", "2", "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1
-    assert f"{p}:6: parameters.preload: no chain for" in err and "contact_dashpot_ratio" in err
+    assert f"{p}:8: parameters.bending_mode_ratio: no chain for" in err, err
+    assert "bending_mode_ratio = 1.0" in err
+    assert not out.exists()
+
+
+def test_a_preload_of_0_N_is_refused_with_the_range_before_any_task(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Before, 0 N was let through (docs/studies.md said it was refused) and every cell of it
+    failed at run time."""
+    p = tmp_path / "s.yaml"
+    p.write_text(TINY.replace("[3 N, 6 N]", "[0 N, 6 N]"))
+    out = tmp_path / "s.h5"
+    assert main(["study", str(p), "--workers", "0", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    assert f"{p}:5: parameters.preload.0: '0 N' is outside (0, inf] N" in err, err
     assert not out.exists()
 
 
