@@ -22,8 +22,10 @@ far cylinder's edge ``f_edge`` from the chain's quasi-bands, first local-resonan
 - ``error_estimate_d``: the integrator's step-doubling estimate (relative L2, worst of the two
   recorded cylinders), and ``f_edge_d``, ``alpha_actual`` (the chain's asymmetry factor).
 
-A cell whose chain cannot be built or whose run is not finite is *failed* (NaN metrics, its
-message kept); one above the study's ``max_error`` is *inaccurate* (numbers kept, flagged).
+A cell whose chain cannot be built, whose run is not finite or whose run raised anything else
+(its exception's type and first line kept) is *failed* (NaN metrics, its message kept); one
+above the study's ``max_error``, or without an error estimate (NaN: the step 2h unstable; its
+message says so), is *inaccurate* (numbers kept, flagged).
 """
 
 from __future__ import annotations
@@ -45,6 +47,7 @@ from analysis.spectra import amplitude_spectrum, peak_frequency
 from protocols.study import PARAMETERS, CellTable, Study
 
 __all__ = [
+    "NO_ESTIMATE",
     "STATUS_FAILED",
     "STATUS_INACCURATE",
     "STATUS_OK",
@@ -61,6 +64,9 @@ __all__ = [
 STATUS_OK = 1
 STATUS_INACCURATE = 2
 STATUS_FAILED = 3
+#: how the message of a cell without an error estimate starts (status inaccurate: its accuracy
+#: cannot be vouched for); before, such a cell was counted "above max_error"
+NO_ESTIMATE = "no error estimate"
 
 _CHAIN_PARAMS = tuple(n for n, p in PARAMETERS.items() if p.target == "chain")
 
@@ -105,7 +111,9 @@ def stored_names(study: Study) -> list[str]:
 
 def task_cells(n_cells: int, cells_per_task: int) -> list[NDArray[np.int64]]:
     """The study's tasks: consecutive cell numbers, ``cells_per_task`` each (the last fewer).
-    Fixed by the cell numbers alone, so a task holds the same cells on any run or resume."""
+    Fixed by the cell numbers and ``cells_per_task`` alone; a continued study runs only the
+    cells of each task not done yet (:func:`daq.study_runner.run_study`), so another
+    ``cells_per_task`` than the first run's regroups what is left and runs no cell twice."""
     return [
         np.arange(s, min(s + cells_per_task, n_cells), dtype=np.int64)
         for s in range(0, n_cells, cells_per_task)
@@ -300,8 +308,10 @@ def _run_group(
     params: dict[str, float],
     rows: list[dict[str, float]],
     grid: NDArray[np.float64] | None,
-) -> tuple[dict[str, NDArray[np.float64]], dict[str, NDArray[np.float32]], float]:
-    """Cells of one chain (``rows``: each cell's parameters) in one batched sweep."""
+) -> tuple[dict[str, NDArray[np.float64]], dict[str, NDArray[np.float32]], list[str]]:
+    """Cells of one chain (``rows``: each cell's parameters) in one batched sweep: their
+    numbers, their spectra, and per cell why it has no error estimate ("" when it has one or
+    none was asked for)."""
     from sim_backend import dem
     from sim_backend.dem.sweep import sweep
 
@@ -362,7 +372,28 @@ def _run_group(
         with np.errstate(divide="ignore", invalid="ignore"):
             out["asymmetry_ratio"] = out["transmission_ltr"] / out["transmission_rtl"]
     out["alpha_actual"] = np.full(k, asymmetry_factor(onset, cutoff))
-    return out, spectra, float(np.max(m.get("error_estimate_rel", np.zeros(1))))
+    return out, spectra, _missing_estimates(res, lanes, k, nd)
+
+
+def _missing_estimates(res: Any, lanes: Sequence[_Lane], k: int, nd: int) -> list[str]:
+    """Per cell (``k`` of them, ``nd`` directions each), why its error estimate is missing:
+    ``"no error estimate (ltr: the step 2h is unstable)"``, or "" for a cell that has one."""
+    est = res.metrics.get("error_estimate_rel")
+    if est is None:
+        return [""] * k
+    methods = list(res.meta.get("error_estimate_method", [])) or [""] * len(lanes)
+    out = []
+    for i in range(k):
+        whys: dict[str, list[str]] = {}  # why -> the directions it is said of
+        for j in range(nd):
+            r = i * nd + j
+            if not math.isfinite(float(est[r])):
+                method = methods[r] if r < len(methods) else ""
+                why = method.removeprefix("none: ") if method.startswith("none") else ""
+                whys.setdefault(why or "not finite", []).append(lanes[r].direction)
+        said = "; ".join(f"{', '.join(ds)}: {why}" for why, ds in whys.items())
+        out.append(f"{NO_ESTIMATE} ({said})" if whys else "")
+    return out
 
 
 def run_task(
@@ -390,12 +421,22 @@ def run_task(
         params = {setup.names[c]: v for c, v in zip(chain_cols, key, strict=True)}
         rows = [{n: float(values[i, j]) for j, n in enumerate(setup.names)} for i in members]
         try:
-            out, spec_out, _ = _run_group(setup, params, rows, grid)
-        except (ValueError, FloatingPointError, ArithmeticError) as exc:
+            out, spec_out, missing = _run_group(setup, params, rows, grid)
+        except Exception as exc:  # a cell's failure, whatever raised it
+            # the model's own refusals (ValueError, ArithmeticError) say what they are; any
+            # other (a bug, a numba error) is named by its type. Before, one stopped the whole
+            # study, and every rerun stopped at the same cell. Ctrl-C and the stop signals
+            # (KeyboardInterrupt) still end the study.
+            first = str(exc).splitlines()[0] if str(exc) else ""
+            expected = isinstance(exc, ValueError | ArithmeticError)
+            why = first if expected and first else f"{type(exc).__name__}: {first}".rstrip(": ")
             for i in members:
                 status[i] = STATUS_FAILED
-                messages[int(cells[i])] = str(exc).splitlines()[0] if str(exc) else repr(exc)
+                messages[int(cells[i])] = why
             continue
+        for i, why in zip(members, missing, strict=True):
+            if why:
+                messages[int(cells[i])] = why
         idx = np.asarray(members)
         for n, arr in out.items():
             if n in metrics:
@@ -405,6 +446,8 @@ def run_task(
     if study.accuracy.error_estimate:
         err = np.stack([metrics[f"error_estimate_{d}"] for d in study.drive.directions])
         worst = np.max(err, axis=0)
+        # above max_error, or no estimate (NaN: its message says why): not within the accuracy
+        # asked for either way, flagged alike; the study's last line counts them apart
         bad = (status == STATUS_OK) & ~(worst <= study.accuracy.max_error)
         status[bad] = STATUS_INACCURATE
     return TaskResult(

@@ -211,14 +211,20 @@ def run_study(
     on_task: TaskCallback | None = None,
     in_flight_per_worker: int = 2,
 ) -> RunSummary:
-    """Run every task of the study with a cell not yet in ``store``; write each result as it
-    comes. ``client=None``: serially in this process. Raises what a task raised (a bug, not a
-    cell's failure: those are recorded per cell)."""
+    """Run the cells not yet in ``store``, task by task (a task with some cells done runs only
+    the others: a study continued with another ``run.cells_per_task`` groups its cells anew,
+    and no done cell runs twice); write each result as it comes. ``client=None``: serially in
+    this process. Raises what a task raised (a bug, not a cell's failure: those are recorded
+    per cell)."""
     t0 = time.perf_counter()
-    tasks = task_cells(table.n_cells, setup.study.run.cells_per_task)
     done = store.done()
     skipped = int(done.sum())
-    todo = [i for i, cells in enumerate(tasks) if not np.all(done[cells])]
+    tasks: dict[int, NDArray[np.int64]] = {}
+    for i, cells in enumerate(task_cells(table.n_cells, setup.study.run.cells_per_task)):
+        left = cells[~done[cells]]
+        if left.size:
+            tasks[i] = left
+    todo = list(tasks)
     n_done = skipped
     task_s = 0.0
 

@@ -88,13 +88,9 @@ class ParameterInfo:
 #: the design parameters a study may vary (name -> info); ``amplitude`` comes from ``drive``
 PARAMETERS: dict[str, ParameterInfo] = {
     "diameter": ParameterInfo("length", "m", "chain", description="cylinder diameter"),
-    "preload": ParameterInfo(
-        "force",
-        "N",
-        "chain",
-        low_open=False,
-        description="static pre-compression F0",
-    ),
+    # > 0 N: at 0 N the contacts have no stiffness and no chain can be built (before, 0 N
+    # was let through and every cell of it failed at run time)
+    "preload": ParameterInfo("force", "N", "chain", description="static pre-compression F0"),
     "length_first": ParameterInfo("length", "m", "chain", description="length of cylinder #1"),
     "length_last": ParameterInfo("length", "m", "chain", description="length of cylinder #N"),
     "n_cylinders": ParameterInfo(
@@ -492,6 +488,16 @@ class Study(_Model):
                 raise ValueError("metrics: asymmetry_ratio needs both directions")
         return self
 
+    @model_validator(mode="after")
+    def _drive_fits_the_record(self) -> Study:
+        """Every burst the study plays (each carrier value, each cycles value) within the
+        record: :func:`protocols.model_request.model_request_error`, the checks ``biafc
+        simulate`` makes, and the whole burst within the window (the metrics integrate it)."""
+        why = drive_request_error(self)
+        if why is not None:
+            raise ValueError(f"{why[0]}: {why[1]}")
+        return self
+
     def metric_names(self) -> list[str]:
         """Stored metric datasets, per direction where the metric is one (``transmission_ltr``)."""
         chosen = list(METRICS) if self.metrics == "all" else list(self.metrics)
@@ -514,6 +520,65 @@ class Study(_Model):
             for k, a in sorted(self.parameters.items())
         }  # fmt: skip
         return json.dumps(data, sort_keys=True)
+
+
+def _axis_values(axis: Axis) -> tuple[float, ...]:
+    """Every value of a grid axis, or both ends of a Latin-hypercube range."""
+    if axis.values is not None:
+        return axis.values
+    assert axis.low is not None and axis.high is not None
+    return (axis.low, axis.high)
+
+
+def drive_request_error(study: Study) -> tuple[str, str] | None:
+    """The first burst of ``study`` its record cannot hold, as ``(field, why)`` (the dotted
+    field of the study file that set it), or None. Every carrier value is checked (a carrier
+    that is a parameter: each value; with a Latin hypercube, both ends of its range), each at
+    the fewest and the most cycles the study plays, and every cycles value at the lowest and
+    the highest carrier (each check is monotonic in either number, so no pair in between can
+    fail where these pass)."""
+    from instruments.burst import NAMED_BURSTS, Burst
+    from protocols.model_request import RequestNames, model_request_error
+
+    sim = study.simulation
+    burst_choice = study.drive.burst
+    if "cycles" in study.parameters:
+        cycles_field = "parameters.cycles"
+        cycles = _axis_values(study.parameters["cycles"])
+    else:
+        cycles_field = "drive.burst"
+        n = burst_choice.cycles
+        cycles = (n if n is not None else NAMED_BURSTS[str(burst_choice.shape)],)
+    longest: tuple[Burst, RequestNames] | None = None
+    for d in study.drive.directions:
+        carrier_axis = study.parameters.get(f"carrier_{d}")
+        if carrier_axis is not None:
+            freq_field: str | None = f"parameters.carrier_{d}"
+            carriers = _axis_values(carrier_axis)
+        else:
+            freq_field = f"drive.carriers.{d}" if d in study.drive.carriers else None
+            carriers = (study.drive.carrier(d),)
+        names = RequestNames(
+            duration="simulation.duration",
+            rate="simulation.rate",
+            frequency=freq_field,
+            burst=cycles_field,
+            cycles=cycles_field,
+        )
+        pairs = [(f, n) for f in carriers for n in {min(cycles), max(cycles)}]
+        pairs += [(f, n) for n in cycles for f in {min(carriers), max(carriers)}]
+        for f, n in pairs:
+            why = model_request_error(sim.duration, sim.rate, Burst(f, cycles=n), None, names)
+            if why is not None:
+                return why
+        burst = Burst(min(carriers), cycles=max(cycles))  # this direction's longest
+        if longest is None or burst.duration_s > longest[0].duration_s:
+            longest = burst, names
+    assert longest is not None  # the directions are never empty
+    # the window against the longest burst of all: the least window it could have is said
+    return model_request_error(
+        sim.duration, sim.rate, longest[0], None, longest[1], whole_burst=True
+    )
 
 
 @dataclass(frozen=True)

@@ -15,7 +15,10 @@ Layout (``format = "biafc-study"``, ``format_version = 1`` on the root)::
     /spectra/freq_Hz      [F] (only with record_spectra); /spectra/<dir> [n_cells, F] float32
     (status, metrics and spectra: chunked, each chunk with a Fletcher-32 checksum that HDF5
     checks at every read; outputs before 2026-11-27 have none)
-    /tasks/wall_s         [n_tasks] float64 (NaN until run); /tasks/worker [n_tasks] str
+    /tasks/wall_s         [n_tasks] float64 (NaN until run); /tasks/worker [n_tasks] str;
+                          attr cells_per_task: the grouping the task numbers count in
+    /tasks_earlier/<k>    the /tasks of an earlier run with another cells_per_task (k = 0, 1,
+                          ...): a study continued with another grouping keeps them aside
 
 Writing follows the run files' discipline (:mod:`protocols.runfile`): the layout is made under a
 temporary name and renamed once complete, then written in SWMR mode (``libver="latest"``), so a
@@ -128,6 +131,7 @@ class StudyStore:
         metric_names: Sequence[str],
         n_tasks: int,
         spectrum_freq_Hz: NDArray[np.float64] | None = None,
+        cells_per_task: int | None = None,
     ) -> StudyStore:
         p = Path(path)
         p.parent.mkdir(parents=True, exist_ok=True)
@@ -182,9 +186,7 @@ class StudyStore:
                         d, shape=(n, spectrum_freq_Hz.size), dtype="f4", fillvalue=np.nan,
                         chunks=(min(n, 64), spectrum_freq_Hz.size), fletcher32=True,
                     ).attrs["unit"] = "m"  # fmt: skip
-            t = f.create_group("tasks")
-            t.create_dataset("wall_s", shape=(n_tasks,), dtype="f8", fillvalue=np.nan)
-            t.create_dataset("worker", shape=(n_tasks,), dtype=h5py.string_dtype())
+            _create_tasks(f, n_tasks, cells_per_task)
             f.flush()
             f.close()
         except BaseException:
@@ -195,10 +197,22 @@ class StudyStore:
         return cls(p, _open_writer(p))
 
     @classmethod
-    def open(cls, path: str | Path, *, digest: str, table: CellTable) -> StudyStore:
+    def open(
+        cls,
+        path: str | Path,
+        *,
+        digest: str,
+        table: CellTable,
+        n_tasks: int | None = None,
+        cells_per_task: int | None = None,
+    ) -> StudyStore:
         """Open an output to continue it; refused (:class:`StudyFileError`) when it is not a
         study output, was made from another study (digest) or holds other cells. The caller holds
-        the file's lock; the open-for-write flags a killed writer left are cleared first."""
+        the file's lock; the open-for-write flags a killed writer left are cleared first.
+        ``n_tasks``, ``cells_per_task``: this run's grouping; when the output's ``/tasks`` counts
+        in another (``run.cells_per_task`` edited between runs: the digest leaves ``run``
+        out), it is kept aside as ``/tasks_earlier/<k>`` and a new ``/tasks`` is made (before,
+        a grouping with more tasks wrote past its end: IndexError at every continue)."""
         from protocols.recover import clear_consistency_flags
 
         p = Path(path)
@@ -225,6 +239,8 @@ class StudyStore:
                 raise StudyFileError(
                     f"{p}: holds other cells than this study's; choose another --out"
                 )
+            if n_tasks is not None:
+                _regroup_tasks(f, n_tasks, cells_per_task)
         except BaseException:
             f.close()
             raise
@@ -296,6 +312,30 @@ class StudyStore:
             self.broken = not_closed(self.path, exc)
             leave_open(self.path)
             raise StudyFileError(self.broken) from None
+
+
+def _create_tasks(f: h5py.File, n_tasks: int, cells_per_task: int | None) -> None:
+    t = f.create_group("tasks")
+    t.create_dataset("wall_s", shape=(n_tasks,), dtype="f8", fillvalue=np.nan)
+    t.create_dataset("worker", shape=(n_tasks,), dtype=h5py.string_dtype())
+    if cells_per_task is not None:
+        t.attrs["cells_per_task"] = cells_per_task
+
+
+def _regroup_tasks(f: h5py.File, n_tasks: int, cells_per_task: int | None) -> None:
+    """``/tasks`` in this run's grouping: as it is when it counts in it (the same
+    ``cells_per_task``, or an output without the attribute whose size matches), else moved
+    to ``/tasks_earlier/<k>`` and made anew (before SWMR starts: no new objects after)."""
+    t = f["tasks"]
+    old = t.attrs.get("cells_per_task")
+    size = int(t["wall_s"].shape[0])
+    if size == n_tasks and (old is None or cells_per_task is None or int(old) == cells_per_task):
+        if old is None and cells_per_task is not None:
+            t.attrs["cells_per_task"] = cells_per_task
+        return
+    earlier = f.require_group("tasks_earlier")
+    f.move("tasks", f"tasks_earlier/{len(earlier)}")
+    _create_tasks(f, n_tasks, cells_per_task)
 
 
 def _software() -> str:

@@ -231,7 +231,13 @@ def _study_figures(args: argparse.Namespace, path: Path, data: StudyData) -> int
     vary = [v for v in varying_parameters(data) if v not in fixed]
     reduce = args.reduce or "mean"
     map_fixed = dict(fixed)
-    if args.reduce is None and "amplitude" in vary and "amplitude" not in (args.x, args.y):
+    # the axes: as given, else the first varied parameters (the amplitude among them, last):
+    # a study over one parameter at several amplitudes draws it against the amplitude (before,
+    # the amplitude was held and counted as an axis too: "y: no other varied parameter")
+    free = [v for v in vary if v not in (args.x, args.y)]
+    x_axis = args.x or (free.pop(0) if free else None)
+    y_axis = args.y or (free.pop(0) if free else None)
+    if args.reduce is None and "amplitude" in vary and "amplitude" not in (x_axis, y_axis):
         # a mean over drive amplitudes mixes regimes: the output peak's mean of 4.39 kHz (at
         # 0.5 um) and 7.45 kHz (at 2 um) drew 5.9 kHz, a peak no run has
         top = float(max(data.parameters["amplitude"]))
@@ -242,10 +248,10 @@ def _study_figures(args: argparse.Namespace, path: Path, data: StudyData) -> int
             f"maps at the largest drive amplitude, {shown} (--fix amplitude=... for another, "
             "--reduce mean to average over amplitudes)"
         )
-    if len(vary) >= 2 or (args.x and args.y):
+    if x_axis is not None and y_axis is not None:
         for metric in metrics:
             try:
-                pm = phase_map(data, metric, args.x, args.y, fixed=map_fixed, reduce=reduce)
+                pm = phase_map(data, metric, x_axis, y_axis, fixed=map_fixed, reduce=reduce)
             except ValueError as exc:
                 raise CliError(str(exc)) from None
             written += save_figure(plot_phase_map(pm, data.units), out, f"map_{metric}")

@@ -10,7 +10,8 @@ output as tasks finish; run the same command again to continue an interrupted st
 already in the output are skipped).
 
 Exit status: 0 every cell ran within the accuracy asked for, 4 finished with failed or
-inaccurate cells (counted in the last line), 1 the study failed (a task raised), 2 refused,
+inaccurate cells or cells without an error estimate (counted in the last line; a cell whose run
+raised is one of the failed), 1 the study failed (a task raised outside its cells), 2 refused,
 130 interrupted (the output keeps every finished task; run again to continue).
 """
 
@@ -128,7 +129,10 @@ def _run_to(
     try:
         try:
             if out.exists():
-                store = StudyStore.open(out, digest=digest, table=table)
+                store = StudyStore.open(
+                    out, digest=digest, table=table, n_tasks=len(tasks),
+                    cells_per_task=study.run.cells_per_task,
+                )  # fmt: skip
             else:
                 grid = spectrum_grid_Hz(study) if study.record_spectra else None
                 store = StudyStore.create(
@@ -136,6 +140,7 @@ def _run_to(
                     chain_yaml=chain_yaml, table=table,
                     directions=study.drive.directions, metric_names=stored_names(study),
                     n_tasks=len(tasks), spectrum_freq_Hz=grid,
+                    cells_per_task=study.run.cells_per_task,
                 )  # fmt: skip
         except StudyFileError as exc:
             raise CliError(str(exc)) from None
@@ -157,7 +162,7 @@ def _announce(study: Any, table: Any, tasks: list[Any], out: Path) -> None:
 def _run(args: argparse.Namespace, setup: Any, table: Any, store: Any, client: Any) -> int:
     import numpy as np
 
-    from analysis.study_cells import STATUS_FAILED, STATUS_INACCURATE
+    from analysis.study_cells import NO_ESTIMATE, STATUS_FAILED, STATUS_INACCURATE
     from daq.cli.stop_signals import raise_if_stopped
     from daq.progress import ProgressDisplay
     from daq.store.disk_space import DiskFull
@@ -209,6 +214,15 @@ def _run(args: argparse.Namespace, setup: Any, table: Any, store: Any, client: A
     finally:
         usable = store.broken is None and store.f.id.valid
         codes = store.f["cells/status"][...] if usable else np.zeros(0)
+        flagged = np.flatnonzero(codes == STATUS_INACCURATE)
+        no_estimate = (
+            sum(
+                str(m).startswith(NO_ESTIMATE)
+                for m in store.f["cells/message"].asstr()[...][flagged]
+            )
+            if usable and flagged.size
+            else 0
+        )
         try:
             store.close(status)
         except StudyFileError:
@@ -225,13 +239,15 @@ def _run(args: argparse.Namespace, setup: Any, table: Any, store: Any, client: A
             print("the output keeps every finished task; run again to continue", file=sys.stderr)
         return 1
     failed = int(np.sum(codes == STATUS_FAILED))
-    inaccurate = int(np.sum(codes == STATUS_INACCURATE))
+    inaccurate = int(np.sum(codes == STATUS_INACCURATE)) - no_estimate
     wall = time.perf_counter() - t0
     rate = summary.cells_run / wall if wall > 0 else float("nan")
     print(
         f"study complete: {summary.cells_run} cells run ({summary.cells_skipped} done before) "
         f"in {wall:.1f} s, {rate:.3g} cells/s on {summary.engine}; "
-        f"{failed} failed, {inaccurate} above max_error; written {store.path}",
+        f"{failed} failed, {inaccurate} above max_error"
+        f"{f', {no_estimate} without an error estimate' if no_estimate else ''}; "
+        f"written {store.path}",
         file=sys.stderr,
     )
-    return 4 if failed or inaccurate else 0
+    return 4 if failed or inaccurate or no_estimate else 0

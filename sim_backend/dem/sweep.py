@@ -112,7 +112,9 @@ def sweep(
     block_size: trajectories per compiled batch (> 0).
     error_estimate: also keep the integrator's step-doubling error estimate of every trajectory
         as ``metrics["error_estimate_rel"]`` [R] (relative L2 of the worst recorded cylinder,
-        :func:`simulate`'s ``error_estimate``; about half the run time again).
+        :func:`simulate`'s ``error_estimate``; about half the run time again), and how each
+        was made as ``meta["error_estimate_method"]`` [R] (``"none: ..."`` says why an
+        estimate is NaN: the step 2h unstable).
     simulate_kwargs: passed to :func:`simulate` (integrator, dt_s, dashpot_kick, ...);
         ``record`` is set here.
     """
@@ -138,6 +140,7 @@ def sweep(
     meta: dict[str, Any] = {}
     finite = True
     in_flight = 0
+    methods: list[str] = []
     time_s = np.arange(n_samples) / sample_rate_Hz
     cyl_out = np.asarray(cyl, dtype=np.int32)
     n_blocks = 0
@@ -158,6 +161,7 @@ def sweep(
                 metrics["error_estimate_rel"] = np.empty(R)
             err = np.asarray(res.meta["error_estimate_rel"], dtype=np.float64)
             metrics["error_estimate_rel"][start : start + len(block)] = err
+            methods += [str(res.meta.get("error_estimate_method", ""))] * len(block)
         if reduce is not None:
             for name, value in reduce(v, res.time_s).items():
                 arr = np.asarray(value)
@@ -182,4 +186,6 @@ def sweep(
             "finite": finite,
         }
     )
+    if error_estimate:
+        meta["error_estimate_method"] = methods
     return SweepResult(time_s, cyl_out, traces, metrics, meta)

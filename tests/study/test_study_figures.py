@@ -101,6 +101,50 @@ def test_fig4_from_a_study_over_alpha(tmp_path: Path) -> None:
     assert (tmp_path / "f" / "alpha_sweep.png").exists()
 
 
+def test_a_study_over_alpha_at_two_amplitudes_draws_alpha_against_amplitude_and_fig4(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """One parameter at two or more amplitudes (the paper's Fig. 4 case): the maps put the
+    amplitude along y (before: "y: no other varied parameter to draw along y", exit 2, and no
+    Fig. 4), and Fig. 4 is drawn at the largest amplitude."""
+    import matplotlib.pyplot as plt
+
+    text = TINY.replace(
+        "  diameter: {from: 12 mm, to: 15 mm, count: 3}\n  preload: [3 N, 6 N]\n",
+        "  alpha: [0.05, 0.15]\n",
+    ).replace("error_estimate: true", "error_estimate: false")
+    study = tmp_path / "alpha.yaml"
+    study.write_text(text + "record_spectra: true\n")
+    out = tmp_path / "alpha.h5"
+    assert main(["study", str(study), "--workers", "0", "--out", str(out), "-q"]) == 0
+    capsys.readouterr()
+    figs = tmp_path / "f"
+    captured: list[Any] = []
+    real = phase_map
+
+    def spy(*args: Any, **kwargs: Any) -> Any:
+        captured.append(real(*args, **kwargs))
+        return captured[-1]
+
+    import analysis.study_maps as sm
+
+    mp = pytest.MonkeyPatch()
+    mp.setattr(sm, "phase_map", spy)
+    try:
+        assert main(["figures", str(out), "--out", str(figs)]) == 0
+    finally:
+        mp.undo()
+    said = capsys.readouterr().out
+    assert "maps at the largest drive amplitude" not in said
+    assert (figs / "map_asymmetry_ratio.png").stat().st_size > 0
+    assert (figs / "alpha_sweep.png").stat().st_size > 0
+    pm = captured[0]
+    assert (pm.x_name, pm.y_name) == ("alpha", "amplitude")
+    np.testing.assert_allclose(pm.y, [0.5e-6, 2e-6])
+    assert pm.values.shape == (2, 2) and np.all(np.isfinite(pm.values)) and not pm.fixed
+    plt.close("all")
+
+
 def test_the_ranking_keeps_only_cells_meeting_the_conditions(serial_reference: Path) -> None:
     from analysis.study_maps import parse_condition
 

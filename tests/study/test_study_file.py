@@ -108,14 +108,30 @@ def test_a_chain_no_cell_can_have_is_refused_before_any_task(
     p = tmp_path / "s.yaml"
     p.write_text(
         TINY.replace("sampling: grid", "chain: dashpot.yaml\nsampling: grid").replace(
-            "[3 N, 6 N]", "[0 N, 6 N]"
+            "  n_cylinders: 5", "  n_cylinders: 5\n  bending_mode_ratio: [0.002, 1.0]"
         )
     )
     out = tmp_path / "s.h5"
     assert main(["study", str(p), "--workers", "2", "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1
-    assert f"{p}:6: parameters.preload: no chain for" in err and "contact_dashpot_ratio" in err
+    assert f"{p}:8: parameters.bending_mode_ratio: no chain for" in err, err
+    assert "bending_mode_ratio = 1.0" in err
+    assert not out.exists()
+
+
+def test_a_preload_of_0_N_is_refused_with_the_range_before_any_task(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Before, 0 N was let through (docs/studies.md said it was refused) and every cell of it
+    failed at run time."""
+    p = tmp_path / "s.yaml"
+    p.write_text(TINY.replace("[3 N, 6 N]", "[0 N, 6 N]"))
+    out = tmp_path / "s.h5"
+    assert main(["study", str(p), "--workers", "0", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    assert f"{p}:5: parameters.preload.0: '0 N' is outside (0, inf] N" in err, err
     assert not out.exists()
 
 
@@ -141,3 +157,85 @@ def test_damaged_results_are_refused_in_one_line(
     assert not (tmp_path / "figs").exists()
     with h5py.File(serial_reference, "r") as f:
         assert all(f[name].fletcher32 for name in ("cells/status", "metrics/asymmetry_ratio"))
+
+
+# a record or window that cannot hold the drive (before: every cell stored "ok" with the
+# numbers of an aliased or cut-off signal); the checks are biafc simulate's
+# (protocols.model_request), the window's against the longest burst the study plays
+DRIVE_TOO_BIG = [
+    (  # the paper's carriers above the Nyquist frequency of a 10 kS/s record
+        (
+            "simulation: {duration: 2 ms, rate: 100 kS/s}",
+            "simulation: {duration: 15 ms, rate: 10 kS/s}",
+        ),
+        11,
+        "simulation.rate",
+        ("Nyquist frequency 5 kHz", "record at more than 28.06 kS/s"),
+    ),
+    (  # a carrier parameter: every value is checked, not only the first
+        ("  n_cylinders: 5", "  n_cylinders: 5\n  carrier_ltr: [8.92 kHz, 150 kHz]"),
+        7,
+        "parameters.carrier_ltr",
+        ("150 kHz burst", "Nyquist frequency 50 kHz"),
+    ),
+    (  # a Latin hypercube's carrier range: its top end
+        ("  n_cylinders: 5", "  n_cylinders: 5\n  carrier_rtl: {from: 6 kHz, to: 60 kHz}"),
+        7,
+        "parameters.carrier_rtl",
+        ("60 kHz burst", "Nyquist frequency 50 kHz"),
+    ),
+    (  # a 0.5 ms window against a 3.2 ms narrowband burst at 6.63 kHz
+        ("burst: {cycles: 5}", "burst: {shape: narrowband}"),
+        11,
+        "simulation.duration",
+        ("shorter than the 6.63 kHz burst (3.167 ms, 21 cycles)", "give at least 3.167 ms"),
+    ),
+    (  # the cycles parameter's largest value at the lowest carrier
+        ("  n_cylinders: 5", "  n_cylinders: 5\n  cycles: [5, 20]"),
+        12,
+        "simulation.duration",
+        ("shorter than the 6.63 kHz burst (3.017 ms, 20 cycles)",),
+    ),
+    (
+        ("  n_cylinders: 5", "  n_cylinders: 5\n  cycles: [0.5, 5]"),
+        7,
+        "parameters.cycles",
+        ("0.5 is outside 1 .. 1000",),
+    ),
+]
+
+
+@pytest.mark.parametrize(("edit", "lineno", "field", "whys"), DRIVE_TOO_BIG)
+def test_a_record_that_cannot_hold_the_drive_is_refused_before_any_task(
+    tmp_path: Path,
+    edit: tuple[str, str],
+    lineno: int,
+    field: str,
+    whys: tuple[str, ...],
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    text = TINY.replace(*edit)
+    if "carrier_rtl: {" in text:
+        text = text.replace("sampling: grid", "sampling: {latin_hypercube: 4, seed: 1}")
+        text = text.replace("{from: 12 mm, to: 15 mm, count: 3}", "13 mm").replace(
+            "[3 N, 6 N]", "5 N"
+        )
+    if "shape: narrowband" in text:
+        text = text.replace("duration: 2 ms", "duration: 0.5 ms")
+    assert text != TINY
+    p = tmp_path / "s.yaml"
+    p.write_text(text)
+    out = tmp_path / "s.h5"
+    assert main(["study", str(p), "--workers", "0", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1, err
+    assert f"{p}:{lineno}: {field}: " in err, err
+    for why in whys:
+        assert why in err, err
+    assert not out.exists()
+
+
+def test_a_record_that_holds_every_burst_is_accepted() -> None:
+    ok = TINY.replace("  n_cylinders: 5", "  n_cylinders: 5\n  carrier_ltr: [5 kHz, 30 kHz]")
+    parse_study(ok)  # 30 kHz, 5 cycles: up to 47 kHz, below 50 kHz
+    parse_study(TINY.replace("duration: 2 ms", "duration: 0.76 ms"))  # 5 cycles at 6.63 kHz

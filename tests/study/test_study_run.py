@@ -156,3 +156,41 @@ def test_an_output_of_another_study_is_not_continued(
     err = capsys.readouterr().err
     assert "made from another study" in err and len(err.strip().splitlines()) == 1
     assert serial_reference.read_bytes() == before
+
+
+@pytest.mark.parametrize(("first", "then"), [(6, 1), (6, 5)])
+def test_a_study_continued_with_another_cells_per_task_runs_each_cell_once_the_same(
+    tiny_study: Path,
+    serial_reference: Path,
+    tmp_path: Path,
+    first: int,
+    then: int,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """``run.cells_per_task`` edited between runs (the digest leaves ``run`` out, so the output
+    is continued): before, 6 -> 1 wrote past the end of /tasks (IndexError at every continue),
+    and 6 -> 5 reran task 0 whole, done cells included ("cell 244/240")."""
+    import h5py
+
+    text = tiny_study.read_text()
+    tiny_study.write_text(text.replace("cells_per_task: 3", f"cells_per_task: {first}"))
+    out = tmp_path / "s.h5"
+    assert main(["study", str(tiny_study), "--workers", "0", "--out", str(out), "-q"]) == 0
+    with h5py.File(out, "r+") as f:  # as if stopped after cells 0-3: the rest not run
+        f["cells/status"][4:] = 0
+        for name in f["metrics"]:
+            f["metrics"][name][4:] = np.nan
+    tiny_study.write_text(text.replace("cells_per_task: 3", f"cells_per_task: {then}"))
+    capsys.readouterr()
+    assert main(["study", str(tiny_study), "--workers", "0", "--out", str(out), "-q"]) == 0
+    err = capsys.readouterr().err
+    assert "study complete: 8 cells run (4 done before)" in err, err
+    _same(serial_reference, out)
+    with h5py.File(out, "r") as f:
+        n_tasks = len(task_cells(12, then))
+        assert f["tasks/wall_s"].shape == (n_tasks,)
+        assert f["tasks"].attrs["cells_per_task"] == then
+        assert f["tasks_earlier/0"].attrs["cells_per_task"] == first
+        assert f["tasks_earlier/0/wall_s"].shape == (2,)
+        ran = np.isfinite(f["tasks/wall_s"][...])
+        assert ran.sum() == len({c // then for c in range(4, 12)})
