@@ -132,5 +132,9 @@ def _quiet_stdout() -> None:
         os.close(devnull)
 
 
-if __name__ == "__main__":
-    raise SystemExit(main())
+if __name__ == "__main__":  # python -m daq.cli.biafc: the console script's own path, so that
+    # the commands' CliError is this module's as imported (run as __main__, it is a second copy
+    # of the module whose class the commands' refusals are not: they escaped as tracebacks)
+    from daq.cli.shutdown import biafc
+
+    raise SystemExit(biafc())

@@ -41,3 +41,20 @@ def test_console_script_refuses_in_one_line(name: str, tmp_path: Path, sources: 
     assert len(lines) == 1 and "Traceback" not in run.stderr, run.stderr
     assert all(f in lines[0] for f in case.expect), lines[0]
     assert sorted(os.listdir(tmp_path)) == before
+
+
+def test_python_dash_m_refuses_in_one_line_as_the_console_script(tmp_path: Path) -> None:
+    """``python -m daq.cli.biafc`` ran the module as a second copy of itself, whose CliError
+    the commands' refusals were not: they came out as tracebacks (exit 1)."""
+    argv = ["simulate", "--direction", "ltr", "--amplitude", "1 um", "--out", "x.h5"]
+    run = subprocess.run(
+        [sys.executable, "-m", "daq.cli.biafc", *argv, "--rate", "10 kS/s"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2])},
+    )
+    lines = run.stderr.strip().splitlines()
+    assert run.returncode == 2 and len(lines) == 1, run.stderr
+    assert "above the Nyquist frequency 5 kHz" in lines[0]
