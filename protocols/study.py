@@ -25,7 +25,7 @@ point and direction. Example (``protocols/studies/example.yaml``)::
 
 With ``latin_hypercube`` every parameter is a range ``{from, to}`` (no count) or one fixed
 value; the design points are a Latin hypercube of that many samples (scipy.stats.qmc, the seed
-given), whole-number parameters rounded.
+given), each whole number of a whole-number parameter's range drawn in equal shares.
 
 A cell is one design point at one amplitude; each direction of a cell is one DEM trajectory.
 Cells are numbered design point first, amplitude inner (:func:`cell_table`).
@@ -462,9 +462,24 @@ class Study(_Model):
                     raise ValueError(f"{m!r}: unknown metric{_closest(str(m), list(METRICS))}")
         return v
 
+    @field_validator("sampling", mode="before")
+    @classmethod
+    def _sampling_count(cls, v: Any) -> Any:
+        """A bad sample count is named as such (the union's error said "Input should be
+        'grid'")."""
+        n = v.get("latin_hypercube") if isinstance(v, dict) else None
+        if isinstance(n, int | float) and not isinstance(n, bool) and not 1 <= n <= 10_000_000:
+            raise ValueError(f"latin_hypercube: give 1 to 10000000 samples, got {n!r}")
+        return v
+
     @model_validator(mode="after")
     def _sampling(self) -> Study:
         lhs = not isinstance(self.sampling, str)
+        if lhs and all(a.values is not None for a in self.parameters.values()):
+            raise ValueError(
+                "sampling: a Latin hypercube needs a parameter given as a range {from, to}; "
+                "with fixed values only every sample is the same cell (use sampling: grid)"
+            )
         for name, axis in self.parameters.items():
             if lhs and axis.values is not None and len(axis.values) > 1:
                 raise ValueError(
@@ -481,7 +496,8 @@ class Study(_Model):
         for d in ("ltr", "rtl"):
             if f"carrier_{d}" in self.parameters and d in self.drive.carriers:
                 raise ValueError(f"drive.carriers: carrier_{d} is a parameter already")
-        if "cycles" in self.parameters and self.drive.burst.shape is not None:
+        named = "burst" in self.drive.model_fields_set and self.drive.burst.shape is not None
+        if "cycles" in self.parameters and named:  # the default shape is no one's choice
             raise ValueError("drive.burst: cycles is a parameter; drop the named shape")
         if self.metrics != "all" and "asymmetry_ratio" in self.metrics:
             if set(self.drive.directions) != {"ltr", "rtl"}:
@@ -514,6 +530,11 @@ class Study(_Model):
         """Canonical JSON of everything that decides a cell's result (not ``name``,
         ``description`` or ``run``): what :attr:`StudyFile.digest` hashes."""
         data = self.model_dump(mode="json", exclude={"name", "description", "run"})
+        if not isinstance(self.sampling, str) and any(
+            a.info.integer and a.values is None for a in self.parameters.values()
+        ):  # whole numbers drawn in equal shares since 2026-11-28 (rounded before): a study
+            # begun before is another study, not continued with other cells
+            data["whole_numbers"] = "equal shares"
         data["parameters"] = {
             k: {"values": list(a.values) if a.values is not None else None,
                 "low": a.low, "high": a.high, "spacing": a.spacing}
@@ -691,7 +712,15 @@ def _design_points(study: Study) -> tuple[list[str], NDArray[np.float64]]:
                 col = np.exp(np.log(a.low) + sample[:, j] * (np.log(a.high) - np.log(a.low)))
             else:
                 col = a.low + sample[:, j] * (a.high - a.low)
-            pts[:, i] = np.round(col) if a.info.integer else col
+            if a.info.integer:  # each whole number its equal share of the samples (rounding
+                # gave the two ends half a share each: 6/14/13/7 of 40 for 5..8)
+                top = a.high + 1.0
+                if a.spacing == "log":
+                    col = np.exp(np.log(a.low) + sample[:, j] * (np.log(top) - np.log(a.low)))
+                else:
+                    col = a.low + sample[:, j] * (top - a.low)
+                col = np.minimum(np.floor(col), a.high)
+            pts[:, i] = col
     for i, a in enumerate(axes):
         if a.values is not None:
             pts[:, i] = a.values[0]

@@ -239,3 +239,56 @@ def test_a_record_that_holds_every_burst_is_accepted() -> None:
     ok = TINY.replace("  n_cylinders: 5", "  n_cylinders: 5\n  carrier_ltr: [5 kHz, 30 kHz]")
     parse_study(ok)  # 30 kHz, 5 cycles: up to 47 kHz, below 50 kHz
     parse_study(TINY.replace("duration: 2 ms", "duration: 0.76 ms"))  # 5 cycles at 6.63 kHz
+
+
+def test_a_cycles_parameter_needs_no_burst_given() -> None:
+    """The default burst (a named shape) made a cycles parameter refused until a dummy
+    ``burst: {cycles: 10}`` was added (a second reader); a shape named in the file still is."""
+    text = TINY.replace("  burst: {cycles: 5}\n", "").replace(
+        "  n_cylinders: 5", "  n_cylinders: 5\n  cycles: [5, 10]"
+    )
+    cells = cell_table(parse_study(text).study)
+    column = cells.values[:, list(cells.names).index("cycles")]
+    assert sorted(set(np.round(column, 6))) == [5.0, 10.0]
+    named = text.replace("  amplitudes:", "  burst: {shape: narrowband}\n  amplitudes:")
+    with pytest.raises(ConfigError, match="cycles is a parameter; drop the named shape"):
+        parse_study(named)
+
+
+LHS = """\
+name: lhs
+sampling: {latin_hypercube: 400, seed: 2}
+parameters:
+  diameter: {from: 12 mm, to: 15 mm}
+  n_cylinders: {from: 5, to: 8}
+drive:
+  amplitudes: [1 um]
+  burst: {cycles: 5}
+simulation: {duration: 2 ms, rate: 100 kS/s}
+"""
+
+
+def test_a_latin_hypercube_draws_each_whole_number_in_equal_shares() -> None:
+    """Rounding gave the two ends of 5..8 half a share each (6/14/13/7 of 40)."""
+    cells = cell_table(parse_study(LHS).study)
+    n = cells.values[:, list(cells.names).index("n_cylinders")]
+    assert sorted(set(n)) == [5.0, 6.0, 7.0, 8.0]
+    assert [int(np.count_nonzero(n == k)) for k in (5, 6, 7, 8)] == [100, 100, 100, 100]
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "expect"),
+    [
+        ("latin_hypercube: 400", "latin_hypercube: 0", "sampling.latin_hypercube: give 1 to"),
+        (
+            "  diameter: {from: 12 mm, to: 15 mm}\n  n_cylinders: {from: 5, to: 8}",
+            "  diameter: 12 mm",
+            "a Latin hypercube needs a parameter given as a range",
+        ),
+    ],
+)
+def test_a_latin_hypercube_that_cannot_sample_is_refused_saying_why(
+    old: str, new: str, expect: str
+) -> None:
+    with pytest.raises(ConfigError, match=expect):
+        parse_study(LHS.replace(old, new))
