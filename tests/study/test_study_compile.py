@@ -7,7 +7,8 @@ from pathlib import Path
 
 import pytest
 
-import daq.cli.warmup
+import daq.study_runner
+from daq.cli import warmup
 from daq.cli.biafc import main
 from sim_backend.dem import kernel_cache
 
@@ -20,11 +21,9 @@ def test_a_study_compiles_the_kernel_before_its_first_task_only_when_none_is_on_
     capsys: pytest.CaptureFixture[str],
     on_disk: bool,
 ) -> None:
-    import daq.study_runner
-
     order: list[str] = []
     monkeypatch.setattr(kernel_cache, "kernel_cached_on_disk", lambda: on_disk)
-    monkeypatch.setattr(daq.cli.warmup, "compile_kernel", lambda chain=None: order.append("c"))
+    monkeypatch.setattr(warmup, "compile_kernel", lambda chain=None: order.append("c"))
     real = daq.study_runner.run_study
 
     def run_study(*a, **k):  # type: ignore[no-untyped-def]
