@@ -45,6 +45,7 @@ from numpy.typing import NDArray
 from analysis.bands import asymmetry_factor, expected_output_Hz, peak_search_range_Hz
 from analysis.spectra import amplitude_spectrum, peak_frequency
 from protocols.study import PARAMETERS, CellTable, Study
+from protocols.studyfile import STATUS_FAILED, STATUS_INACCURATE, STATUS_OK
 
 __all__ = [
     "NO_ESTIMATE",
@@ -61,9 +62,6 @@ __all__ = [
     "task_cells",
 ]
 
-STATUS_OK = 1
-STATUS_INACCURATE = 2
-STATUS_FAILED = 3
 #: how the message of a cell without an error estimate starts (status inaccurate: its accuracy
 #: cannot be vouched for); before, such a cell was counted "above max_error"
 NO_ESTIMATE = "no error estimate"

@@ -24,7 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from protocols.study import PARAMETERS
-from protocols.studyfile import StudyData
+from protocols.studyfile import STATUS_FAILED, STATUS_INACCURATE, STATUS_OK, StudyData
 
 __all__ = [
     "REDUCERS",
@@ -35,12 +35,12 @@ __all__ = [
     "parse_condition",
     "phase_map",
     "rank_designs",
+    "sampled",
     "select_cells",
     "varying_parameters",
 ]
 
 REDUCERS = ("mean", "median", "max", "min")
-_STATUS_OK = 1
 #: at most this many distinct values make a parameter a grid axis; more are binned
 _GRID_MAX = 64
 
@@ -49,7 +49,11 @@ _GRID_MAX = 64
 class PhaseMap:
     """A heat map: ``values [ny, nx]`` of ``metric`` over ``x [nx]`` and ``y [ny]`` (SI centres
     of the grid values or bins); NaN where no cell counted. ``fixed``: parameter -> the value
-    used; ``reduced``: parameters marginalised with ``reduce``; ``cells``: cells counted."""
+    used; ``reduced``: parameters marginalised with ``reduce``; ``cells``: cells counted;
+    ``left_out``: cells that ran outside the accuracy asked for (or without an estimate);
+    ``failed``: cells that failed, and ``failed_xy`` the map cells (x, y centres, SI) where at
+    least one of those drawn would have sat; ``x_log``, ``y_log``: that axis is binned
+    logarithmically (draw it on a log scale)."""
 
     metric: str
     unit: str
@@ -63,6 +67,10 @@ class PhaseMap:
     reduce: str
     cells: int
     left_out: int
+    failed: int = 0
+    failed_xy: tuple[tuple[float, float], ...] = ()
+    x_log: bool = False
+    y_log: bool = False
 
 
 def varying_parameters(data: StudyData) -> list[str]:
@@ -81,11 +89,11 @@ def default_axes(data: StudyData) -> tuple[str, str]:
 
 
 def select_cells(
-    data: StudyData, fixed: dict[str, float] | None = None
+    data: StudyData, fixed: dict[str, float] | None = None, *, status: int = STATUS_OK
 ) -> tuple[NDArray[np.bool_], dict[str, float]]:
-    """Cells that ran within accuracy and sit at the ``fixed`` values (the nearest value of each
-    parameter the study holds, returned as used)."""
-    keep = data.status == _STATUS_OK
+    """Cells that ran within accuracy (or have another ``status``) and sit at the ``fixed``
+    values (the nearest value of each parameter the study holds, returned as used)."""
+    keep = data.status == status
     used: dict[str, float] = {}
     for name, want in (fixed or {}).items():
         if name not in data.parameters:
@@ -102,17 +110,33 @@ def select_cells(
     return keep, used
 
 
-def _axis(values: NDArray[np.float64], bins: int, name: str) -> tuple[NDArray[Any], NDArray[Any]]:
-    """(centres, index of each cell) of one axis: distinct values, or ``bins`` bins."""
+def sampled(data: StudyData) -> bool:
+    """Whether the study drew its design points (a Latin hypercube) rather than a grid."""
+    import yaml
+
+    try:
+        doc = yaml.safe_load(str(data.attrs.get("study_yaml", ""))) or {}
+    except yaml.YAMLError:
+        return False
+    return isinstance(doc, dict) and isinstance(doc.get("sampling"), dict)
+
+
+def _axis(
+    values: NDArray[np.float64], bins: int, name: str, drawn: bool = False
+) -> tuple[NDArray[Any], NDArray[Any], bool]:
+    """(centres, index of each cell, whether the bins are logarithmic) of one axis: distinct
+    values, or ``bins`` bins. A drawn axis (a Latin hypercube's) is binned once it has more
+    distinct values than ``bins`` (40 samples were 40 slivers); a grid's once it has more than
+    ``_GRID_MAX``."""
     distinct = np.unique(values)
-    if distinct.size <= _GRID_MAX:
-        return distinct, np.searchsorted(distinct, values)
+    if distinct.size <= (bins if drawn else _GRID_MAX):
+        return distinct, np.searchsorted(distinct, values), False
     lo, hi = float(values.min()), float(values.max())
     log = name in PARAMETERS and lo > 0 and hi / lo > 10
     edges = np.geomspace(lo, hi, bins + 1) if log else np.linspace(lo, hi, bins + 1)
     centres = np.sqrt(edges[1:] * edges[:-1]) if log else 0.5 * (edges[1:] + edges[:-1])
     idx = np.clip(np.searchsorted(edges, values, side="right") - 1, 0, bins - 1)
-    return centres, idx
+    return centres, idx, log
 
 
 def phase_map(
@@ -150,9 +174,16 @@ def phase_map(
         raise ValueError("x and y: two different parameters")
     fixed = {k: v for k, v in (fixed or {}).items() if k not in (x, y)}
     keep, used = select_cells(data, fixed)
-    left_out = int(np.sum((data.status != 0) & (data.status != _STATUS_OK)))
-    xc, xi = _axis(data.parameters[x], bins, x)
-    yc, yi = _axis(data.parameters[y], bins, y)
+    left_out = int(np.sum(data.status == STATUS_INACCURATE))
+    failed = data.status == STATUS_FAILED
+    drawn = sampled(data)
+    if drawn:  # about one design point a map cell: bins per axis ~ sqrt(design points)
+        bins = min(bins, max(2, round(math.sqrt(np.unique(data.point).size))))
+    xc, xi, x_log = _axis(data.parameters[x], bins, x, drawn and x != "amplitude")
+    yc, yi, y_log = _axis(data.parameters[y], bins, y, drawn and y != "amplitude")
+    at_fixed, _ = select_cells(data, fixed, status=STATUS_FAILED)
+    hit = np.unique(yi[at_fixed] * xc.size + xi[at_fixed])
+    failed_xy = tuple((float(xc[k % xc.size]), float(yc[k // xc.size])) for k in hit)
     vals = data.metrics[metric]
     keep = keep & np.isfinite(vals)
     grid = np.full((yc.size, xc.size), np.nan)
@@ -170,7 +201,7 @@ def phase_map(
     reduced = [n for n in varying_parameters(data) if n not in (x, y) and n not in used]
     return PhaseMap(
         metric, data.units.get(metric, ""), x, y, xc, yc, grid, used, reduced, reduce,
-        int(keep.sum()), left_out,
+        int(keep.sum()), left_out, int(failed.sum()), failed_xy, x_log, y_log,
     )  # fmt: skip
 
 

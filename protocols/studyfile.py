@@ -53,6 +53,10 @@ from protocols.studyformat import FORMAT, FORMAT_VERSION, DamagedCellsError, Stu
 
 __all__ = [
     "FORMAT",
+    "STATUS_FAILED",
+    "STATUS_INACCURATE",
+    "STATUS_NOT_RUN",
+    "STATUS_OK",
     "StudyData",
     "StudyFileError",
     "StudyStore",
@@ -60,6 +64,12 @@ __all__ = [
     "read_open_study",
     "read_study",
 ]
+
+#: /cells/status codes (the layout above)
+STATUS_NOT_RUN = 0
+STATUS_OK = 1
+STATUS_INACCURATE = 2
+STATUS_FAILED = 3
 
 
 def _unit(name: str) -> str:

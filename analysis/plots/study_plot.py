@@ -5,8 +5,16 @@ from __future__ import annotations
 import numpy as np
 from matplotlib.colors import LogNorm, Normalize
 from matplotlib.figure import Figure
+from matplotlib.ticker import FuncFormatter
 
-from analysis.plots.style import add_gap_background, cell_edges, masked_cmap, new_figure, style
+from analysis.plots.style import (
+    FAILED_COLOUR,
+    add_gap_background,
+    cell_edges,
+    masked_cmap,
+    new_figure,
+    style,
+)
 from analysis.study_maps import PhaseMap
 
 __all__ = ["axis_label", "display_scale", "plot_phase_map"]
@@ -59,9 +67,16 @@ def plot_phase_map(pm: PhaseMap, units: dict[str, str]) -> Figure:
         ax = axs[0, 0]
         add_gap_background(ax)
         mesh = ax.pcolormesh(
-            cell_edges(pm.x * kx), cell_edges(pm.y * ky), vals, cmap=masked_cmap("viridis"),
-            norm=norm, shading="flat",
+            cell_edges(pm.x * kx, log=pm.x_log), cell_edges(pm.y * ky, log=pm.y_log), vals,
+            cmap=masked_cmap("viridis"), norm=norm, shading="flat",
         )  # fmt: skip
+        plain = FuncFormatter(lambda v, _: f"{v:g}")
+        for on, axis, scale in ((pm.x_log, ax.xaxis, ax.set_xscale),
+                                (pm.y_log, ax.yaxis, ax.set_yscale)):  # fmt: skip
+            if on:  # log bins on a log axis, ticks as plain numbers
+                scale("log")
+                axis.set_major_formatter(plain)
+                axis.set_minor_formatter(plain)
         ax.set_xlabel(axis_label(pm.x_name, units.get(pm.x_name, "")))
         ax.set_ylabel(axis_label(pm.y_name, units.get(pm.y_name, "")))
         fig.colorbar(mesh, ax=ax, label=axis_label(pm.metric, pm.unit))
@@ -71,7 +86,14 @@ def plot_phase_map(pm: PhaseMap, units: dict[str, str]) -> Figure:
             parts.append(f"{name} = {v * k:.4g} {u}".strip())
         if pm.reduced:
             parts.append(f"{pm.reduce} over {', '.join(pm.reduced)}")
+        if pm.failed:
+            parts.append(f"{pm.failed} cells failed (x)")
         if pm.left_out:
             parts.append(f"{pm.left_out} cells off accuracy left out")
+        if pm.failed_xy:  # a failed cell is not a gap like one not run: a cross on its cell
+            fx, fy = (np.array(v) for v in zip(*pm.failed_xy, strict=True))
+            ax.plot(fx * kx, fy * ky, "x", color=FAILED_COLOUR, ms=7, mew=2, ls="none",
+                    label="failed cell", zorder=5)  # fmt: skip
+            ax.legend(loc="upper right", fontsize=7, framealpha=0.85)
         ax.set_title(pm.metric + ("\n" + "; ".join(parts) if parts else ""), fontsize=9)
     return fig

@@ -24,6 +24,7 @@ from analysis.display import amplitude_label, amplitude_scale
 
 __all__ = [
     "DARK_EDGE",
+    "FAILED_COLOUR",
     "FORMATS",
     "GAP_LABEL",
     "RC",
@@ -45,6 +46,8 @@ FORMATS: tuple[str, ...] = ("png", "pdf")
 DARK_EDGE = [patheffects.withStroke(linewidth=2.6, foreground="0.15")]
 #: legend text of the hatched "not measured" background
 GAP_LABEL = "failed or not measured"  # both leave NaN: a failed point is not "not measured"
+#: the colour of a mark on something that failed (a study's failed cells)
+FAILED_COLOUR = "crimson"
 
 RC: dict[str, Any] = {
     "font.size": 11,

@@ -218,13 +218,21 @@ def _study_figures(args: argparse.Namespace, path: Path, data: StudyData) -> int
         varying_parameters,
     )
     from instruments.units import format_quantity
+    from protocols.studyfile import STATUS_FAILED, STATUS_INACCURATE
 
     out = args.out or path.with_name(f"{path.stem}_figures")
     can_write_folder(out, "--out")
     fixed = _parse_fix(args.fix, str(data.attrs.get("amplitude_kind", "displacement")))
     done = int((data.status != 0).sum())
+    n_failed = int((data.status == STATUS_FAILED).sum())
+    n_off = int((data.status == STATUS_INACCURATE).sum())
+    not_ok = ", ".join(
+        text
+        for n, text in ((n_failed, f"{n_failed} failed"), (n_off, f"{n_off} off accuracy"))
+        if n
+    )
     print(f"{path}: study {data.attrs.get('name')}, {done} of {data.n_cells} cells run "
-          f"({data.attrs.get('status')})")  # fmt: skip
+          f"({data.attrs.get('status')}){f'; {not_ok}' if not_ok else ''}")  # fmt: skip
     hidden = ("f_edge_", "alpha_actual")
     metrics = args.metric or [m for m in data.metrics if not m.startswith(hidden)]
     written: list[Path] = []

@@ -217,3 +217,48 @@ def test_maps_are_drawn_at_the_largest_amplitude_unless_asked_to_reduce(
     assert seen == [{"amplitude": 2e-6}]
     assert main([*argv, "--reduce", "mean"]) == 0
     assert "largest drive amplitude" not in capsys.readouterr().out and seen[-1] == {}
+
+
+def test_a_small_latin_hypercube_is_binned_too_about_one_point_a_cell(tmp_path: Path) -> None:
+    """40 samples (fewer than the 64 distinct values that made an axis a grid) were drawn as a
+    40 x 40 map of slivers (a second reader)."""
+    text = (
+        TINY.replace("sampling: grid", "sampling: {latin_hypercube: 40, seed: 1}")
+        .replace("{from: 12 mm, to: 15 mm, count: 3}", "{from: 12 mm, to: 15 mm}")
+        .replace("[3 N, 6 N]", "{from: 1 N, to: 50 N, spacing: log}")
+        .replace("amplitudes: [0.5 um, 2 um]", "amplitudes: [2 um]")
+        .replace("cells_per_task: 3", "cells_per_task: 40")
+        .replace("error_estimate: true", "error_estimate: false")
+    )
+    study = tmp_path / "lhs.yaml"
+    study.write_text(text)
+    out = tmp_path / "lhs.h5"
+    assert main(["study", str(study), "--workers", "0", "--out", str(out), "-q"]) == 0
+    pm = phase_map(read_study(out), "transmission_ltr", "diameter", "preload")
+    assert pm.values.shape == (6, 6) and pm.cells == 40  # round(sqrt(40)) bins an axis
+    assert pm.y_log and not pm.x_log  # 1-50 N drawn in log bins
+
+
+def test_failed_cells_are_counted_and_crossed_not_called_off_accuracy(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A second reader: the map's title said "3 cells off accuracy left out" for cells that
+    failed (no chain for that alpha), drawn as the cells not run, and the header said
+    "12 of 12 cells run (complete)"."""
+    text = TINY.replace("  preload: [3 N, 6 N]\n", "  alpha: [0.1, 1.9]\n").replace(
+        "amplitudes: [0.5 um, 2 um]", "amplitudes: [2 um]"
+    )
+    study = tmp_path / "af.yaml"
+    study.write_text(text)
+    out = tmp_path / "af.h5"
+    assert main(["study", str(study), "--workers", "0", "--out", str(out), "-q"]) == 4
+    data = read_study(out)
+    failed = int(np.sum(data.status == 3))
+    assert failed == 3  # alpha 1.9 at each diameter
+    pm = phase_map(data, "transmission_ltr", "diameter", "alpha")
+    assert pm.failed == failed and pm.left_out == 0
+    assert sorted(y for _, y in pm.failed_xy) == [1.9] * 3
+    capsys.readouterr()
+    assert main(["figures", str(out), "--out", str(tmp_path / "f")]) == 0
+    assert "3 of 6 cells run" not in (head := capsys.readouterr().out.splitlines()[0])
+    assert head.endswith("(complete); 3 failed"), head
