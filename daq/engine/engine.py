@@ -411,7 +411,13 @@ class RunEngine:
                 except Exception:
                     pass
                 level = "info" if status == "complete" else "error"
-                self._log(level, f"run {status}" + (f": {reason}" if reason else ""))
+                ended = SimpleNamespace(
+                    status=status, reason=reason, points_failed_only=points_failed_only
+                )
+                # the words the last line and the file's outcome use ("finished with failed
+                # points: ...", not "run failed: finished with failed points: ...")
+                said = outcome_text(ended)
+                self._log(level, said if status != "complete" else "run complete")
                 if not unconfirmed:
                     self._log(
                         "info",
@@ -424,13 +430,10 @@ class RunEngine:
                     f"failed {self._n_failed_now} (of {self.plan.n_points})",
                 )
                 try:
-                    ended = SimpleNamespace(
-                        status=status, reason=reason, points_failed_only=points_failed_only
-                    )
                     self._writer.close(
                         status,  # type: ignore[arg-type]
                         simulation=self._simulation_attrs(),
-                        outcome=outcome_text(ended),
+                        outcome=said,
                     )
                 except Exception as exc:  # the file's status is not written: not complete
                     reason = reason or f"closing the run file failed: {exc}"
