@@ -49,6 +49,7 @@ __all__ = [
     "ZaberReply",
     "ZaberSettings",
     "ZaberStage",
+    "max_speed_m_per_s",
     "microstep_of_model",
     "parse_reply",
 ]
@@ -96,6 +97,13 @@ class ZaberReply:
     flag: str
     data: str
     message_id: int | None = None
+
+
+def max_speed_m_per_s(microstep_m: float, resolution: int) -> float:
+    """The firmware-6 protocol manual's ceiling of ``maxspeed`` in m/s: data ``resolution x
+    16384``, i.e. 10,000 full steps/s (30.48 mm/s on an X-LSM at any resolution), for a
+    microstep of ``microstep_m`` at ``resolution`` microsteps per step."""
+    return resolution * 16384 / SPEED_UNIT * microstep_m
 
 
 def microstep_of_model(model: str, resolution: int) -> tuple[float, float]:
@@ -515,7 +523,8 @@ class ZaberStage:
 
     def _max_speed_m_per_s(self) -> float:
         """:meth:`_max_speed_data` in m/s."""
-        return self._max_speed_data() / SPEED_UNIT * self.microstep_m
+        resolution = int((self._identity or {}).get("resolution", self.settings.resolution))
+        return max_speed_m_per_s(self.microstep_m, resolution)
 
     def speed(self) -> float:
         """Current ``maxspeed`` in m/s."""

@@ -214,7 +214,28 @@ class StageSpec(_Model):
             )
         if self.microstep is not None and not self.microstep > 0:
             raise ValueError("microstep must be > 0")
+        top = self.max_speed()
+        if top is not None and self.speed > top * (1 + 1e-9):
+            raise ValueError(
+                f"speed: {self.speed * 1e3:.4g} mm/s is above this stage's "
+                f"{top * 1e3:.4g} mm/s (10,000 full steps/s, Zaber's protocol manual); the "
+                "stage refuses it at connect"
+            )
         return self
+
+    def max_speed(self) -> float | None:
+        """The stage's top speed (m/s) from its microstep (given, or its model's), None when
+        neither is known (:func:`instruments.zaber.max_speed_m_per_s`)."""
+        from instruments.errors import LimitError
+        from instruments.zaber import max_speed_m_per_s, microstep_of_model
+
+        micro = self.microstep
+        if micro is None and self.model is not None:
+            try:
+                micro = microstep_of_model(self.model, self.resolution)[0]
+            except LimitError:
+                return None
+        return None if micro is None else max_speed_m_per_s(micro, self.resolution)
 
 
 class DaqSpec(_Model):
