@@ -223,7 +223,7 @@ def run_alpha_sweep(
             f_in = inputs[d]
             spec = amplitude_spectrum(v_far, sample_rate_Hz).band(*f_range)
             lo, hi = peak_search_range_Hz(f_in, onset, cutoff)
-            out[d][i] = float(peak_frequency(spec, lo, hi))
+            out[d][i] = float(peak_frequency(spec, lo, hi, interior=True))
             exp[d][i] = expected_output_Hz(f_in, d, onset, cutoff)
             tr[d][i] = float(energy_transmission(v_entry, v_far, sample_rate_Hz))
             rows[d].append(spec.magnitude)

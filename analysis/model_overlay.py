@@ -159,7 +159,7 @@ class ModelOverlay:
         if math.isfinite(self.clip):
             v = np.clip(v, -self.clip, self.clip)
         spec = amplitude_spectrum(v, rate)
-        peaks = peak_frequency(spec, *f_range_Hz)
+        peaks = peak_frequency(spec, *f_range_Hz, interior=True)
         out = OverlayPrediction(spec.freq_Hz, spec.magnitude, np.asarray(peaks, np.float64))
         with self._lock:
             self._cache[key] = out

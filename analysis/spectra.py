@@ -143,11 +143,17 @@ def peak_frequency(
     spectrum: Spectrum,
     f_min_Hz: float = 0.0,
     f_max_Hz: float = math.inf,
+    *,
+    interior: bool = False,
 ) -> NDArray[np.float64]:
     """Frequency (Hz) of the largest magnitude in ``[f_min_Hz, f_max_Hz]``, for every record.
 
     Refined by a parabola through the highest bin and its neighbours. Returns ``[...]`` (the
     spectrum's leading shape); NaN for records that are NaN or have no bin in the range.
+    ``interior``: a largest magnitude on the range's first or last bin (the spectrum still
+    rising out of the range: its line lies outside) is no peak, NaN; the output peaks take it
+    (a chain's low-frequency content read as a line at the search range's lower edge, 2.1 kHz
+    for an 8.92 kHz drive).
     """
     sel = (spectrum.freq_Hz >= f_min_Hz) & (spectrum.freq_Hz <= f_max_Hz)
     lead = spectrum.magnitude.shape[:-1]
@@ -161,6 +167,8 @@ def peak_frequency(
         if not np.all(np.isfinite(row)) or not np.any(row > 0):
             continue
         k = int(np.argmax(row))
+        if interior and f.size > 2 and k in (0, f.size - 1):
+            continue
         fk = float(f[k])
         if 0 < k < f.size - 1:
             a, b, c = row[k - 1], row[k], row[k + 1]

@@ -264,7 +264,7 @@ class _Reducer:
         conv = np.empty(b)
         for i, ln in enumerate(lanes):
             lo, hi = ln.search
-            peak[i] = float(peak_frequency(_row(spec, i), lo, hi))
+            peak[i] = float(peak_frequency(_row(spec, i), lo, hi, interior=True))
             if ln.f_edge < ln.f_in:
                 sel = (f_bins >= lo) & (f_bins < ln.f_in - 2.0 * ln.sigma_f)
             elif ln.f_edge > ln.f_in:

@@ -144,7 +144,8 @@ def amplitude_sweep(scan: ScanData, chain: ChainInfo) -> AmplitudeSweep:
         noise_ratio = np.where(noise > 0, e_far / noise, np.where(noise == 0, np.inf, np.nan))
         floor = np.isfinite(transmission) & ~resolved(e_far, noise)
         bound = np.where(floor, RESOLVED_FACTOR * noise / e_entry, np.nan)
-    out_hz = np.where(floor, np.nan, peak_frequency(spec))  # a noise line is no output peak
+    # a noise line is no output peak, nor a maximum on the search range's edge
+    out_hz = np.where(floor, np.nan, peak_frequency(spec, interior=True))
     reference, is_bound = linear_reference(scan.amplitudes, transmission, floor, bound)
     gain = np.where(np.isfinite(transmission) & ~floor, transmission / reference, np.nan)
     return AmplitudeSweep(

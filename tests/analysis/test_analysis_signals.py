@@ -126,3 +126,18 @@ def test_energy_transmission_nan_for_unmeasured() -> None:
     x[1] = np.nan
     tr = energy_transmission(x, x, RATE)
     assert tr[0] == pytest.approx(1.0) and np.isnan(tr[1])
+
+
+def test_an_output_peak_is_not_a_maximum_on_the_search_ranges_edge() -> None:
+    """A second reader: at alpha 0.7-0.9 the far end's low-frequency content, falling through
+    the search range's lower edge, was read as a line there (2.10 kHz for a 2.09 kHz bound)."""
+    from analysis.spectra import Spectrum
+
+    f = np.arange(0.0, 20_000.0, 50.0)
+    falling = 1.0 / (1.0 + f / 300.0)  # content below the range, falling through it
+    line = 0.5 * np.exp(-(((f - 8000.0) / 200.0) ** 2))
+    spec = Spectrum(f, np.stack([falling, falling + line]))
+    edge = peak_frequency(spec, 2000, 12000)
+    assert edge[0] == 2000.0  # the old answer: the range's first bin
+    inner = peak_frequency(spec, 2000, 12000, interior=True)
+    assert np.isnan(inner[0]) and abs(inner[1] - 8000.0) < 1.0
