@@ -15,6 +15,7 @@ not depend on where or with which other cells a cell runs (bit for bit, ``tests/
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 import threading
@@ -164,18 +165,23 @@ def dask_client(workers: int) -> Iterator[Any]:
     A running cluster's client comes from :func:`connect_scheduler`."""
     from distributed import Client, LocalCluster
 
-    cluster = LocalCluster(
-        n_workers=workers,
-        threads_per_worker=1,
-        processes=True,
-        dashboard_address=None,
-        # the scheduler serves its HTTP routes even without a dashboard, on 8787 unless told:
-        # another process there printed "Port 8787 is already in use" in the study's terminal
-        scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
-        silence_logs=logging.ERROR,
-        env=_numba_threads_env(workers),
-        preload=["daq.study_worker"],  # a terminal's Ctrl-C is the study's, not each worker's
-    )
+    try:
+        cluster = LocalCluster(
+            n_workers=workers,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            # the scheduler serves its HTTP routes even without a dashboard, on 8787 unless
+            # told: another process there printed "Port 8787 is already in use" in the
+            # study's terminal
+            scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
+            silence_logs=logging.ERROR,
+            env=_numba_threads_env(workers),
+            preload=["daq.study_worker"],  # a terminal's Ctrl-C is the study's, not each worker's
+        )
+    except BaseException:  # interrupted while it starts (Ctrl-C in the first second)
+        _forget_half_started()
+        raise
     try:
         client = Client(cluster)
         try:
@@ -186,6 +192,18 @@ def dask_client(workers: int) -> Iterator[Any]:
     finally:
         with _quiet_closing():
             cluster.close()
+
+
+def _forget_half_started() -> None:
+    """Close what a LocalCluster interrupted while starting left registered, and forget it:
+    ``distributed``'s exit hook closed it again and printed a 28-line "Exception ignored ...
+    AssertionError: Status.init" after the study's clean last line (a second reader)."""
+    from distributed.deploy.spec import SpecCluster
+
+    for cluster in list(SpecCluster._instances):
+        with _quiet_closing(), contextlib.suppress(Exception):
+            cluster.close(timeout=5)
+        SpecCluster._instances.discard(cluster)
 
 
 @contextmanager
