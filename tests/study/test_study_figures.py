@@ -262,3 +262,20 @@ def test_failed_cells_are_counted_and_crossed_not_called_off_accuracy(
     assert main(["figures", str(out), "--out", str(tmp_path / "f")]) == 0
     assert "3 of 6 cells run" not in (head := capsys.readouterr().out.splitlines()[0])
     assert head.endswith("(complete); 3 failed"), head
+
+
+def test_the_ranking_is_at_the_maps_amplitude(
+    serial_reference: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The maps were at the largest amplitude and best_designs.txt ranked every amplitude:
+    the example's top 7 were 0.5 um cells the maps did not show (a second reader)."""
+    src = tmp_path / "s.h5"
+    shutil.copy(serial_reference, src)
+    assert main(["figures", str(src), "--out", str(tmp_path / "f")]) == 0
+    table = (tmp_path / "f" / "best_designs.txt").read_text().splitlines()
+    rows = [line for line in table if line.strip()[:1].isdigit()]
+    assert rows and all(" 2 um " in line for line in rows), table
+    assert table[-1].startswith("(at the largest drive amplitude")
+    assert main(["figures", str(src), "--out", str(tmp_path / "g"), "--reduce", "mean"]) == 0
+    mixed = (tmp_path / "g" / "best_designs.txt").read_text()
+    assert " 0.5 um " in mixed and "largest drive amplitude" not in mixed
