@@ -82,15 +82,21 @@ def test_biafc_figures_opens_a_study_once(
     assert probes == [src]  # twice before
 
 
-def test_fig4_from_a_study_over_alpha(tmp_path: Path) -> None:
+def _alpha_study(tmp_path: Path, old: str, new: str) -> Path:
+    """TINY over alpha 0.05 and 0.15 with its spectra recorded (and ``old`` made ``new``), run."""
     text = TINY.replace(
         "  diameter: {from: 12 mm, to: 15 mm, count: 3}\n  preload: [3 N, 6 N]\n",
         "  alpha: [0.05, 0.15]\n",
-    ).replace("amplitudes: [0.5 um, 2 um]", "amplitudes: [2 um]")
+    ).replace(old, new)
     study = tmp_path / "alpha.yaml"
     study.write_text(text + "record_spectra: true\n")
     out = tmp_path / "alpha.h5"
     assert main(["study", str(study), "--workers", "0", "--out", str(out), "-q"]) == 0
+    return out
+
+
+def test_fig4_from_a_study_over_alpha(tmp_path: Path) -> None:
+    out = _alpha_study(tmp_path, "amplitudes: [0.5 um, 2 um]", "amplitudes: [2 um]")
     data = read_study(out)
     sweep = alpha_sweep_from_study(data)
     assert list(sweep.alphas) == [0.05, 0.15]
@@ -109,14 +115,7 @@ def test_a_study_over_alpha_at_two_amplitudes_draws_alpha_against_amplitude_and_
     Fig. 4), and Fig. 4 is drawn at the largest amplitude."""
     import matplotlib.pyplot as plt
 
-    text = TINY.replace(
-        "  diameter: {from: 12 mm, to: 15 mm, count: 3}\n  preload: [3 N, 6 N]\n",
-        "  alpha: [0.05, 0.15]\n",
-    ).replace("error_estimate: true", "error_estimate: false")
-    study = tmp_path / "alpha.yaml"
-    study.write_text(text + "record_spectra: true\n")
-    out = tmp_path / "alpha.h5"
-    assert main(["study", str(study), "--workers", "0", "--out", str(out), "-q"]) == 0
+    out = _alpha_study(tmp_path, "error_estimate: true", "error_estimate: false")
     capsys.readouterr()
     figs = tmp_path / "f"
     captured: list[Any] = []
@@ -168,11 +167,12 @@ def test_the_shipped_studies_load_and_the_example_is_small() -> None:
     assert cell_table(example).n_cells <= 100 and example.simulation.duration <= 10e-3
 
 
-def test_a_latin_hypercube_study_is_binned_on_its_map(tmp_path: Path) -> None:
+def _lhs_study(tmp_path: Path, samples: int, preload: str) -> Path:
+    """TINY as a Latin hypercube of ``samples`` over diameter and ``preload`` (a range), run."""
     text = (
-        TINY.replace("sampling: grid", "sampling: {latin_hypercube: 80, seed: 1}")
+        TINY.replace("sampling: grid", f"sampling: {{latin_hypercube: {samples}, seed: 1}}")
         .replace("{from: 12 mm, to: 15 mm, count: 3}", "{from: 12 mm, to: 15 mm}")
-        .replace("[3 N, 6 N]", "{from: 3 N, to: 6 N}")
+        .replace("[3 N, 6 N]", preload)
         .replace("amplitudes: [0.5 um, 2 um]", "amplitudes: [2 um]")
         .replace("cells_per_task: 3", "cells_per_task: 40")
         .replace("error_estimate: true", "error_estimate: false")
@@ -181,7 +181,11 @@ def test_a_latin_hypercube_study_is_binned_on_its_map(tmp_path: Path) -> None:
     study.write_text(text)
     out = tmp_path / "lhs.h5"
     assert main(["study", str(study), "--workers", "0", "--out", str(out), "-q"]) == 0
-    data = read_study(out)
+    return out
+
+
+def test_a_latin_hypercube_study_is_binned_on_its_map(tmp_path: Path) -> None:
+    data = read_study(_lhs_study(tmp_path, 80, "{from: 3 N, to: 6 N}"))
     pm = phase_map(data, "transmission_ltr", "diameter", "preload", bins=4)
     assert pm.values.shape == (4, 4) and pm.cells == 80
     assert pm.x[0] > 12e-3 and pm.x[-1] < 15e-3  # bin centres
@@ -222,18 +226,7 @@ def test_maps_are_drawn_at_the_largest_amplitude_unless_asked_to_reduce(
 def test_a_small_latin_hypercube_is_binned_too_about_one_point_a_cell(tmp_path: Path) -> None:
     """40 samples (fewer than the 64 distinct values that made an axis a grid) were drawn as a
     40 x 40 map of slivers (a second reader)."""
-    text = (
-        TINY.replace("sampling: grid", "sampling: {latin_hypercube: 40, seed: 1}")
-        .replace("{from: 12 mm, to: 15 mm, count: 3}", "{from: 12 mm, to: 15 mm}")
-        .replace("[3 N, 6 N]", "{from: 1 N, to: 50 N, spacing: log}")
-        .replace("amplitudes: [0.5 um, 2 um]", "amplitudes: [2 um]")
-        .replace("cells_per_task: 3", "cells_per_task: 40")
-        .replace("error_estimate: true", "error_estimate: false")
-    )
-    study = tmp_path / "lhs.yaml"
-    study.write_text(text)
-    out = tmp_path / "lhs.h5"
-    assert main(["study", str(study), "--workers", "0", "--out", str(out), "-q"]) == 0
+    out = _lhs_study(tmp_path, 40, "{from: 1 N, to: 50 N, spacing: log}")
     pm = phase_map(read_study(out), "transmission_ltr", "diameter", "preload")
     assert pm.values.shape == (6, 6) and pm.cells == 40  # round(sqrt(40)) bins an axis
     assert pm.y_log and not pm.x_log  # 1-50 N drawn in log bins
