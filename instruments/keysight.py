@@ -243,11 +243,15 @@ class KeysightGenerator:
 
     def connect(self) -> str:
         """Device clear (a reply that an earlier session left unread is dropped: ``*CLS``
-        clears the error queue, not the output queue), ``*CLS`` (a stale error queue),
-        ``*IDN?``; returns the identity."""
+        clears the error queue, not the output queue; skipped where the VISA session has none,
+        as pyvisa-py's USB and serial sessions), ``*CLS`` (a stale error queue), ``*IDN?``;
+        returns the identity."""
         clear = getattr(self.transport, "clear", None)
         if clear is not None:
-            clear()
+            try:
+                clear()
+            except InstrumentError as exc:  # pyvisa-py has no device clear on USB or ASRL
+                log.info("%s: no device clear at connect (%s)", self.transport.name, exc)
         self.transport.write("*CLS")
         return self.identify()
 

@@ -72,6 +72,19 @@ def test_connect_drops_a_reply_an_earlier_session_left_unread() -> None:
     assert gen.output_state(1) is False and gen.errors() == []
 
 
+def test_connect_goes_on_where_the_session_has_no_device_clear() -> None:
+    """pyvisa-py's USB and serial sessions answer a device clear with VI_ERROR_NSUP_OPER: the
+    connect failed on them once it began with one (a second reader)."""
+    emu = KeysightEmulator()
+    link = SimTransport(emu, "generator", 2.0, SimClock())
+
+    def unsupported() -> None:
+        raise InstrumentError("generator: 'device clear' failed (VI_ERROR_NSUP_OPER)")
+
+    link.clear = unsupported  # type: ignore[method-assign]
+    assert KeysightGenerator(link, LIMITS).connect().count(",") == 3
+
+
 def test_connect_clears_a_stale_error_queue() -> None:
     gen, emu = on_emulator()
     emu.push_error(-350, "Queue overflow")  # left over from the last session
