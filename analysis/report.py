@@ -104,8 +104,8 @@ def write_figures(run: RunData, out_dir: str | Path) -> FigureReport:
             report.skipped[f"*_{direction}"] = "no point measured"
             continue
         sw = amplitude_sweep(scan, chain)
-        # a far record at the noise floor is measured, with no peak to give
-        n_far = int(np.count_nonzero(np.isfinite(sw.output_Hz) | sw.at_noise_floor))
+        # measured, with or without a peak to give (at the noise floor, or none inside the range)
+        n_far = int(np.count_nonzero(sw.far_measured))
         if n_far >= MIN_SWEEP_AMPLITUDES:
             sweeps[direction] = sw
         else:

@@ -174,14 +174,14 @@ def phase_map(
         raise ValueError("x and y: two different parameters")
     fixed = {k: v for k, v in (fixed or {}).items() if k not in (x, y)}
     keep, used = select_cells(data, fixed)
-    left_out = int(np.sum(data.status == STATUS_INACCURATE))
-    failed = data.status == STATUS_FAILED
     drawn = sampled(data)
     if drawn:  # about one design point a map cell: bins per axis ~ sqrt(design points)
         bins = min(bins, max(2, round(math.sqrt(np.unique(data.point).size))))
     xc, xi, x_log = _axis(data.parameters[x], bins, x, drawn and x != "amplitude")
     yc, yi, y_log = _axis(data.parameters[y], bins, y, drawn and y != "amplitude")
+    # counted where the map is drawn (the fixed values), as the cells it shows
     at_fixed, _ = select_cells(data, fixed, status=STATUS_FAILED)
+    left_out = int(np.sum(select_cells(data, fixed, status=STATUS_INACCURATE)[0]))
     hit = np.unique(yi[at_fixed] * xc.size + xi[at_fixed])
     failed_xy = tuple((float(xc[k % xc.size]), float(yc[k // xc.size])) for k in hit)
     vals = data.metrics[metric]
@@ -201,7 +201,7 @@ def phase_map(
     reduced = [n for n in varying_parameters(data) if n not in (x, y) and n not in used]
     return PhaseMap(
         metric, data.units.get(metric, ""), x, y, xc, yc, grid, used, reduced, reduce,
-        int(keep.sum()), left_out, int(failed.sum()), failed_xy, x_log, y_log,
+        int(keep.sum()), left_out, int(at_fixed.sum()), failed_xy, x_log, y_log,
     )  # fmt: skip
 
 
@@ -263,7 +263,7 @@ def rank_designs(
 def _fmt(name: str, value: float, units: dict[str, str]) -> str:
     unit = units.get(name, "")
     if not math.isfinite(value):
-        return "nan"
+        return "-"  # as every other table prints a value it does not have
     scale = {"m": (1e3, "mm"), "N": (1.0, "N"), "Hz": (1e-3, "kHz")}
     if name == "amplitude" and unit == "m":
         return f"{value * 1e6:.3g} um"
@@ -316,8 +316,9 @@ def alpha_sweep_from_study(data: StudyData, *, fixed: dict[str, float] | None = 
         if name != "alpha" and name not in chosen:
             col = data.parameters[name]
             chosen[name] = float(col.max() if name == "amplitude" else col.min())
+    # every cell that ran within accuracy: an alpha with no output peak keeps its spectra and
+    # the other direction's peak (it was dropped whole when the first direction had none)
     keep, used = select_cells(data, chosen)
-    keep = keep & np.isfinite(data.metrics.get(f"peak_frequency_{data.directions[0]}", keep))
     idx = np.flatnonzero(keep)
     idx = idx[np.argsort(data.parameters["alpha"][idx], kind="stable")]
     if idx.size < 2:

@@ -108,8 +108,13 @@ def summary_rows(sweep: AmplitudeSweep, scan: ScanData | None = None) -> list[di
         verdict = conversion_verdict(
             detuning, float(sweep.input_Hz[a]), float(sweep.transmission[a]), gain
         )
+        measured = math.isfinite(float(sweep.transmission[a]))
         if floor:
             verdict = "none"
+        elif measured and not math.isfinite(float(sweep.output_Hz[a])):
+            # measured, no line inside the search range (its largest value on an edge)
+            passes = math.isfinite(gain) and gain >= GAIN_MIN
+            verdict = "undetermined" if passes else "none"
         elif verdict == "none" and sweep.reference_is_bound and math.isfinite(gain):
             moved = abs(detuning) >= DETUNING_MIN_FRACTION * float(sweep.input_Hz[a])
             verdict = "undetermined" if moved and gain < GAIN_MIN else verdict
@@ -139,7 +144,9 @@ def summary_rows(sweep: AmplitudeSweep, scan: ScanData | None = None) -> list[di
 
 def summarize(run: RunData) -> dict[str, Any]:
     """Summary of a run: ``{"file", "status", "backend", "far_cylinder", "output_peak",
-    "rows": [...]}``; ``output_peak`` says per direction what ``output_Hz`` (f_out) is.
+    "points", "noise_unknown", "rows": [...]}``; ``output_peak`` says per direction what
+    ``output_Hz`` (f_out) is; ``noise_unknown``: the directions whose measured far records
+    have no pre-trigger samples to estimate the noise from.
 
     ``rows`` holds one dict per direction and amplitude (see :func:`summary_rows`).
     """
@@ -147,8 +154,11 @@ def summarize(run: RunData) -> dict[str, Any]:
     far: dict[str, int] = {}
     peak: dict[str, str] = {}
     points: dict[str, dict[str, int]] = {}
+    unknown: list[str] = []
     for direction, scan in run.scans.items():
         sweep = amplitude_sweep(scan, run.chain)
+        if sweep.far_measured.any() and not sweep.noise_known:
+            unknown.append(direction)
         far[direction] = sweep.far
         peak[direction] = output_peak_definition(sweep)
         rows.extend(summary_rows(sweep, scan))
@@ -164,6 +174,7 @@ def summarize(run: RunData) -> dict[str, Any]:
         "far_cylinder": far,
         "output_peak": peak,
         "points": points,
+        "noise_unknown": unknown,
         "rows": rows,
     }
 
@@ -189,10 +200,10 @@ def format_summary(summary: dict[str, Any]) -> str:
     for r in summary["rows"]:
         tr = "-" if r["transmission"] is None else f"{r['transmission']:.3g}"
         if r.get("at_noise_floor") and r.get("transmission_upper_bound") is not None:
-            tr = f"<{r['transmission_upper_bound']:.2g}"
+            tr = f"<{r['transmission_upper_bound']:.3g}"
         gain = "-" if r["transmission_gain"] is None else f"{r['transmission_gain']:.3g}"
         if r["transmission_gain"] is not None and r.get("gain_is_lower_bound"):
-            gain = f">={r['transmission_gain']:.2g}"
+            gain = f">={r['transmission_gain']:.3g}"
         amp = amplitude_label(r["amplitude"], r["amplitude_units"])
         lines.append(
             f"{r['direction']:4} {amp:>12} {khz(r['input_Hz']):>9} {khz(r['output_Hz']):>9} "
@@ -201,13 +212,18 @@ def format_summary(summary: dict[str, Any]) -> str:
         )
     if any(r.get("at_noise_floor") for r in summary["rows"]):
         lines.append(
-            "<x: the far end held no more than the noise of its own pre-trigger samples; "
+            "<x: the far end held less than 4x the energy its own pre-trigger noise gives; "
             "the ratio is at most x and no output peak is given"
         )
     if any(r.get("gain_is_lower_bound") for r in summary["rows"]):
         lines.append(
             ">=x: the smallest amplitude is at the noise floor, so the linear reference is an "
             "upper bound and the gains lower bounds"
+        )
+    for direction in summary.get("noise_unknown", []):
+        lines.append(
+            f"{direction}: no noise estimate (its records have no pre-trigger samples: "
+            "acquisition.pre_trigger); a far end at the noise floor cannot be told from a signal"
         )
     for name, why in summary.get("figures_left_out", {}).items():
         lines.append(f"left out {name}: {why}")

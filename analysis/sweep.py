@@ -63,7 +63,9 @@ class AmplitudeSweep:
     ``at_noise_floor [A]`` (measured, and not above the noise), ``transmission_bound [A]`` (an
     upper bound of the transmission where at the noise floor, NaN elsewhere);
     ``reference``: the linear reference (E_far / E_entry, NaN without one);
-    ``reference_is_bound``: it is such a bound, so the gains are lower bounds."""
+    ``reference_is_bound``: it is such a bound, so the gains are lower bounds;
+    ``far_measured [A]``: the far record was measured (whether or not a peak was found);
+    ``noise_known``: a measured far record had pre-trigger samples to estimate its noise."""
 
     direction: str
     amplitudes: NDArray[np.float64]
@@ -84,6 +86,8 @@ class AmplitudeSweep:
     transmission_bound: NDArray[np.float64]
     reference: float
     reference_is_bound: bool
+    far_measured: NDArray[np.bool_]
+    noise_known: bool
 
 
 def cylinder_index(scan: ScanData, number: int) -> int | None:
@@ -138,12 +142,14 @@ def amplitude_sweep(scan: ScanData, chain: ChainInfo) -> AmplitudeSweep:
     in_hz = input_frequency_Hz(scan)
     e_far = signal_energy(v_far, rate)
     e_entry = signal_energy(v_entry, rate)
+    far_measured = np.all(np.isfinite(v_far), axis=-1)
     with np.errstate(divide="ignore", invalid="ignore"):
         transmission = np.where(e_entry > 0, e_far / e_entry, np.nan)
         noise = noise_energy(v_far, scan.time_s, rate)
         noise_ratio = np.where(noise > 0, e_far / noise, np.where(noise == 0, np.inf, np.nan))
-        floor = np.isfinite(transmission) & ~resolved(e_far, noise)
-        bound = np.where(floor, RESOLVED_FACTOR * noise / e_entry, np.nan)
+        # the far record alone decides (its entry point may have failed)
+        floor = far_measured & ~resolved(e_far, noise)
+        bound = np.where(floor & (e_entry > 0), RESOLVED_FACTOR * noise / e_entry, np.nan)
     # a noise line is no output peak, nor a maximum on the search range's edge
     out_hz = np.where(floor, np.nan, peak_frequency(spec, interior=True))
     reference, is_bound = linear_reference(scan.amplitudes, transmission, floor, bound)
@@ -168,6 +174,8 @@ def amplitude_sweep(scan: ScanData, chain: ChainInfo) -> AmplitudeSweep:
         transmission_bound=bound,
         reference=reference,
         reference_is_bound=is_bound,
+        far_measured=far_measured,
+        noise_known=bool(np.any(np.isfinite(noise[far_measured]))),
     )
 
 

@@ -25,7 +25,8 @@ point and direction. Example (``protocols/studies/example.yaml``)::
 
 With ``latin_hypercube`` every parameter is a range ``{from, to}`` (no count) or one fixed
 value; the design points are a Latin hypercube of that many samples (scipy.stats.qmc, the seed
-given), each whole number of a whole-number parameter's range drawn in equal shares.
+given), each whole number of a whole-number parameter's linear range drawn in equal shares
+(a log range weights them as the logarithm does).
 
 A cell is one design point at one amplitude; each direction of a cell is one DEM trajectory.
 Cells are numbered design point first, amplitude inner (:func:`cell_table`).

@@ -56,6 +56,14 @@ def plot_regime(sweeps: Mapping[str, AmplitudeSweep]) -> Figure:
                 ax_t.plot(amps[noisy], np.sqrt(sw.transmission_bound[noisy]), "v", color=colour,
                           mfc="none", ls="none",
                           label=f"{d.upper()} at the noise floor (at most)")  # fmt: skip
+            f_in = float(np.nanmedian(sw.input_Hz))  # drawn whatever was measured
+            ax_f.axhline(f_in / 1e3, color=colour, ls="--", lw=1,
+                         label=f"{d.upper()} input {f_in / 1e3:.2f} kHz")  # fmt: skip
+            if np.isfinite(sw.expected_Hz):  # none without a local-resonance band
+                edge = f"{d.upper()} far-cylinder edge {sw.expected_Hz / 1e3:.2f} kHz"
+                ax_f.axhline(sw.expected_Hz / 1e3, color=colour, ls=":", lw=1.5, label=edge)
+            gone = ~sw.far_measured & (amps > 0)  # measured without a peak is not missing
+            mark_missing(ax_f, amps[gone], colour, label=missing, at=at)
             if not ok.any():
                 continue
             floor = float(np.sqrt(sw.reference)) if np.isfinite(sw.reference) else math.nan
@@ -69,16 +77,8 @@ def plot_regime(sweeps: Mapping[str, AmplitudeSweep]) -> Figure:
                              label=f"{d.upper()} linear floor {'at most ' if bound else ''}"
                              f"{floor:.2g}")  # fmt: skip
             fo = np.isfinite(sw.output_Hz) & (amps > 0)
-            gone = ~fo & (amps > 0) & ~noisy  # no peak at the noise floor is no missing point
-            mark_missing(ax_f, amps[gone], colour, label=missing, at=at)
             ax_f.plot(amps[fo], sw.output_Hz[fo] / 1e3, MARKERS.get(d, "o-"), color=colour,
                       label=f"{d.upper()} far-end peak")  # fmt: skip
-            f_in = float(np.nanmedian(sw.input_Hz))
-            ax_f.axhline(f_in / 1e3, color=colour, ls="--", lw=1,
-                         label=f"{d.upper()} input {f_in / 1e3:.2f} kHz")  # fmt: skip
-            if np.isfinite(sw.expected_Hz):  # none without a local-resonance band
-                edge = f"{d.upper()} far-cylinder edge {sw.expected_Hz / 1e3:.2f} kHz"
-                ax_f.axhline(sw.expected_Hz / 1e3, color=colour, ls=":", lw=1.5, label=edge)
         ax_t.set_xscale("log")
         ax_t.set_yscale("log")
         ax_t.set_ylabel("far/near rms ratio")

@@ -68,7 +68,7 @@ def _map(ax: Axes, sw: AmplitudeSweep) -> QuadMesh:
     ax.set_ylabel(f"drive amplitude ({unit})")
     ax.set_title(f"{sw.direction.upper()}: far cylinder #{sw.far}")
     handles, _ = ax.get_legend_handles_labels()
-    if not np.all(ok | sw.at_noise_floor):  # a row at the noise floor is drawn, with no peak
+    if not np.all(sw.far_measured):  # a measured row is drawn, with or without a peak
         handles.append(gap_legend_handle())
     ax.legend(handles=handles, loc="lower left", fontsize=8, framealpha=0.85)
     return mesh
@@ -133,7 +133,7 @@ def plot_amplitude_sweep(sweeps: Mapping[str, AmplitudeSweep]) -> Figure:
                         fontsize=8,
                         color=colour,
                     )
-                gone = ~ok & ~sw.at_noise_floor  # at the noise floor: measured, no peak
+                gone = ~sw.far_measured  # measured without a peak is no missing point
                 mark_missing(
                     ax, sw.amplitudes[gone] / f, colour, along="y",
                     label=f"{d.upper()} far cylinder failed or not measured",
@@ -143,6 +143,9 @@ def plot_amplitude_sweep(sweeps: Mapping[str, AmplitudeSweep]) -> Figure:
                 if np.isfinite(sw.expected_Hz):  # none without a local-resonance band
                     ax.axvline((sw.expected_Hz - f_in) / 1e3, color=colour, ls=":", lw=1.5)
                 if _log_amplitudes(sw.amplitudes):
+                    a = sw.amplitudes / f  # the limits first: with no point drawn (every far
+                    # record at the noise floor) the log scale had no data and failed
+                    ax.set_ylim(float(a.min()) / 1.5, float(a.max()) * 1.5)
                     ax.set_yscale("log")
             ax.set_xlabel("detuning f_out - f_in (kHz)")
             ax.set_ylabel(f"drive amplitude ({unit})" if same else "drive amplitude")
