@@ -16,11 +16,11 @@ and nowhere else. Layout (see the design notes)::
     /snapshot         attr json: every instrument's snapshot() at start (when the file is
                       created, before any burst is set up or the stage homed)
         armed         (run engine) rows (time, direction, amplitude_index, amplitude, json):
-                      every instrument's snapshot() again each time the generator was set up
-                      for a direction and amplitude, json as /snapshot's: the burst as the
-                      generator read it back (Vpp, offset, sample rate, load), the
-                      vibrometer's range, sensitivity and delay then; a resume adds rows
-                      (the first one after it shows what the resume ran with). time: unix s
+                      the generator's snapshot() each time it was set up for a direction and
+                      amplitude (the burst as it read it back: Vpp, offset, sample rate,
+                      load) and read_back.vibrometer.range, the decoder range then (its
+                      sensitivity and delay are per point, below); a resume adds rows (the
+                      first one after it shows what the resume ran with). time: unix s
                       (UTC); amplitude_index: 0-based row of the direction's amplitudes
     /chain            lengths_m [N], onset_Hz [N, B], cutoff_Hz [N, B] (attr axes: row n
                       cylinder n + 1, column b its band b + 1 in rising frequency, onset 0 Hz
@@ -82,9 +82,10 @@ Writing uses SWMR and flushes after every point, so a crash loses at most the po
 and a reader can follow a run live. HDF5 forbids changing attributes under SWMR, so the final
 ``status`` is written when the writer closes (re-opening the file without SWMR), with the run
 engine's ``outcome``: the words the run's last line begins with ("complete", "finished with
-failed points: ...", "run failed: <reason>", "run aborted: ...", "run UNSAFE: ..."), so that a
-run that failed and one that finished with failed points (both ``status`` "failed") differ in
-the file too. Older files have no ``outcome``.
+failed points: ...", "run failed: <reason>", "run aborted: ...", "run UNSAFE (<reason>):
+SWITCH OFF BY HAND: ..."), so that a run that failed and one that finished with failed points
+(both ``status`` "failed") differ in the file too; a resume removes it until its own close,
+and a repair writes its own. Older files have no ``outcome``.
 """
 
 from __future__ import annotations
@@ -324,9 +325,10 @@ _ARMED_DTYPE = np.dtype(
 )
 
 ARMED_DESCRIPTION = (
-    "every instrument's snapshot() (json, as /snapshot's) each time the generator was set up "
-    "for a direction and amplitude: the burst as it read it back and the vibrometer's range "
-    "then; a resume adds rows. /snapshot's own json is the one at creation, before any set-up. "
+    "the generator's snapshot() (json: generator, as in /snapshot's) each time it was set up "
+    "for a direction and amplitude, the burst as it read it back, and the vibrometer's range "
+    "then (read_back.vibrometer.range); a resume adds rows. /snapshot's own json is every "
+    "instrument's at creation, before any set-up. "
     "amplitude_index: 0-based row of /scan/<direction>/amplitudes"
 )
 
@@ -501,6 +503,8 @@ class RunFileWriter:
         _check_format(path)
         f = h5py.File(path, "r+", libver="latest")
         f.attrs["status"] = "running"
+        if "outcome" in f.attrs:  # the earlier session's: this one's is written at its close
+            del f.attrs["outcome"]
         if resumed:
             f.attrs["resumed"] = now_iso()
             _require_file_fields(f)

@@ -412,12 +412,17 @@ class RunEngine:
                     pass
                 level = "info" if status == "complete" else "error"
                 ended = SimpleNamespace(
-                    status=status, reason=reason, points_failed_only=points_failed_only
+                    status=status,
+                    reason=reason,
+                    points_failed_only=points_failed_only,
+                    unconfirmed=tuple(unconfirmed),
                 )
                 # the words the last line and the file's outcome use ("finished with failed
-                # points: ...", not "run failed: finished with failed points: ...")
+                # points: ...", not "run failed: finished with failed points: ..."); the log
+                # says what to switch off by hand on a line of its own (above)
                 said = outcome_text(ended)
-                self._log(level, said if status != "complete" else "run complete")
+                logged = outcome_text(SimpleNamespace(**{**vars(ended), "unconfirmed": ()}))
+                self._log(level, logged if status != "complete" else "run complete")
                 if not unconfirmed:
                     self._log(
                         "info",
@@ -512,12 +517,10 @@ class RunEngine:
             "dem_runs_json": json.dumps(runs, default=float),
         }
 
-    def _snapshot(self, *, with_model: bool = True) -> dict[str, Any]:
+    def _snapshot(self) -> dict[str, Any]:
         """Every instrument's ``snapshot()``, what each reports when asked now (``read_back``:
         identity, outputs, decoder range and sensitivity, stage position, digitiser rate) and,
-        on the simulated bench with ``with_model``, the model's parameters
-        (``simulation_model``; at creation only: a resume's other bench is recorded in
-        ``bench_overrides_json``)."""
+        on the simulated bench, the model's parameters (``simulation_model``)."""
         inst = self.instruments
         snap = inst.snapshot()
         gen, vib, stage = inst.generator, inst.vibrometer, inst.stage
@@ -546,7 +549,7 @@ class RunEngine:
                     read_back[name][key] = f"error: {exc}"
         read_back["digitiser"] = {"sample_rate_Hz": getattr(self, "_rate_Hz", None)}
         snap["read_back"] = read_back
-        config = getattr(inst.world, "config", None) if with_model else None
+        config = getattr(inst.world, "config", None)
         if config is not None:
             snap["simulation_model"] = _jsonable(config)
         return snap
@@ -774,10 +777,14 @@ class RunEngine:
         errs = gen.errors()
         if errs:
             raise InstrumentError(f"generator reported: {'; '.join(errs)}")
-        # the instruments as set up now (the burst read back, the vibrometer's range): the
-        # file's /snapshot is taken at creation, before any of it, and a resume takes none
-        snap = self._snapshot(with_model=False)
-        gen_snap = snap.get("generator")
+        # the instruments as set up now: the generator's snapshot (the burst read back, asked
+        # here before as well) and the vibrometer's range; the file's /snapshot is taken at
+        # creation, before any of it, and a resume takes none. Asked as the run asks: a dead
+        # instrument ends the run at its first timeout (a snapshot of every instrument took
+        # up to 7 timeouts more on a dead vibrometer; a reviewer)
+        gen_snap = self._ask("generator", gen.snapshot)
+        vib_range = self._ask("vibrometer", self.instruments.vibrometer.velocity_range)
+        snap = {"generator": gen_snap, "read_back": {"vibrometer": {"range": vib_range}}}
         self._log(
             "info",
             f"generator channel {ch}: {point.direction} burst {point.generator_Vpp:.4g} Vpp"

@@ -83,8 +83,7 @@ def final_line(result: Any) -> str:
     if getattr(result, "safe_state_s", None) is not None and status != "refused":
         safe = f"; safe state confirmed in {result.safe_state_s:.1f} s"
     if status == "unsafe":
-        why = f" ({result.reason})" if result.reason else ""
-        return f"run UNSAFE{why}: {unsafe_instruction(result.unconfirmed)}"
+        return outcome_text(result)
     if status == "refused":
         return f"run refused: {result.reason}"
     if status == "complete":
@@ -99,12 +98,14 @@ def outcome_text(result: Any) -> str:
     """What happened, in the words the file keeps (root attribute ``outcome``) and the last
     line begins with: ``"complete"``, ``"finished with failed points: ..."`` (exit 4, which
     the file's ``status`` "failed" shares with a run that failed), ``"run failed: <reason>"``,
-    ``"run aborted: ..."``, ``"run UNSAFE: ..."``."""
+    ``"run aborted: ..."``, ``"run UNSAFE (<reason>): SWITCH OFF BY HAND: ..."``."""
     status = str(result.status)
     if status == "complete":
         return "complete"
     if getattr(result, "points_failed_only", False):
         return str(result.reason)
-    if status == "unsafe":
-        return f"run UNSAFE: {result.reason}" if result.reason else "run UNSAFE"
+    if status == "unsafe":  # with what to switch off, as the last line says it
+        why = f" ({result.reason})" if result.reason else ""
+        unconfirmed = tuple(getattr(result, "unconfirmed", ()) or ())
+        return f"run UNSAFE{why}" + (f": {unsafe_instruction(unconfirmed)}" if unconfirmed else "")
     return f"run {status}: {result.reason}" if result.reason else f"run {status}"

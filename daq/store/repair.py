@@ -157,7 +157,11 @@ def repair_run(path: str | Path) -> RepairReport:
                 f"filled or its folder turned read-only); {n_done} point(s) kept, {n_failed} "
                 f"failed, {n_pending} pending (continue with --resume)",
             )
-            writer.close("aborted", stamp="repaired")
+            writer.close(
+                "aborted",
+                stamp="repaired",
+                outcome="run aborted: the writer did not close the file (repaired)",
+            )
             status_after = "aborted"
             actions.append("marked the run aborted (it was still 'running')")
         for part in _leftovers(path):

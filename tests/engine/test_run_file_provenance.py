@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import h5py
 import numpy as np
@@ -132,7 +133,7 @@ def test_the_instruments_as_set_up_are_kept_at_every_arming_and_after_a_resume(
     with h5py.File(out, "r") as f:
         first = f["snapshot"].attrs["json"]
         armed = f["snapshot/armed"]
-        assert "snapshot()" in armed.attrs["description"]
+        assert "generator's snapshot()" in armed.attrs["description"]
         assert "unix epoch" in armed.attrs["time_units"]
         rows = armed[...]
     # ltr A1, ltr A2, rtl A1 before the stall; rtl A1 again and rtl A2 after the resume
@@ -145,7 +146,7 @@ def test_the_instruments_as_set_up_are_kept_at_every_arming_and_after_a_resume(
     assert json.loads(first)["read_back"]["vibrometer"]["range"] == "VD-09 50mm/s/V"  # kept
     snaps = read_run(out).armed_snapshots
     assert [s["direction"] for s in snaps] == ["ltr", "ltr", "rtl", "rtl", "rtl"]
-    assert snaps[-1]["snapshot"]["vibrometer"] == {"range": "VD-09 10mm/s/V"}
+    assert snaps[-1]["snapshot"]["read_back"]["vibrometer"] == {"range": "VD-09 10mm/s/V"}
 
 
 def test_the_generators_read_back_burst_reaches_the_file_on_the_simulated_bench(
@@ -218,3 +219,41 @@ def test_band_columns_are_named_and_the_run_log_stamps_carry_their_zone(tmp_path
     stamp = re.compile(r"^\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\.\d{3}[+-]\d\d:\d\d ")
     assert lines and all(stamp.match(line) for line in lines if line[:2] == "20"), lines[:2]
     assert stamp.match(lines[0])
+
+
+def test_a_vibrometer_dead_at_an_arming_ends_the_run_at_its_first_timeout(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A reviewer: the per-arming snapshot asked every instrument everything, swallowing each
+    error, so a dead vibrometer cost 7 timeouts (22 s simulated) before the run stopped."""
+    from daq.cli import run_protocol as rp
+    from daq.engine import engine as eng
+    from sim_backend.emulators import transport
+    from sim_backend.simbench import emulated
+
+    seen: dict[str, Any] = {"timeouts": []}
+    sync = emulated.EmulatedInstruments.sync
+
+    def keep(self: Any, which: str) -> None:
+        sync(self, which)
+        seen["inst"] = self
+
+    timeout = transport.SimTransport._timeout
+
+    def count(self: Any, what: str) -> Any:
+        seen["timeouts"].append(what)
+        return timeout(self, what)
+
+    arm = eng.RunEngine._arm_generator
+
+    def dies_at_the_second(self: Any, point: Any) -> Any:
+        if point.amplitude_index == 1:
+            seen["inst"].vibrometer.responsive = False
+        return arm(self, point)
+
+    monkeypatch.setattr(emulated.EmulatedInstruments, "sync", keep)
+    monkeypatch.setattr(transport.SimTransport, "_timeout", count)
+    monkeypatch.setattr(eng.RunEngine, "_arm_generator", dies_at_the_second)
+    smoke = Path(__file__).resolve().parents[2] / "protocols" / "smoke.yaml"
+    assert rp.main([str(smoke), "--out", str(tmp_path / "s.h5"), "--quiet"]) == 1
+    assert seen["timeouts"] == ["Get,VeloDec,1,Name"]

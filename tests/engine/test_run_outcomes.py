@@ -65,7 +65,9 @@ def test_a_generator_that_stops_answering_ends_unsafe_at_once(protocol, bench, o
     assert gen.queries <= 2  # type: ignore[attr-defined]
     run = read_run(out)
     assert run.status == "unsafe"
-    assert run.attrs["outcome"].startswith("run UNSAFE: safe state not confirmed after the run")
+    outcome = run.attrs["outcome"]  # with what to switch off, as the last line (a reviewer)
+    assert outcome.startswith("run UNSAFE (safe state not confirmed after the run")
+    assert "SWITCH OFF BY HAND" in outcome and "output 1" in outcome
     assert any("SWITCH OFF BY HAND" in m and "output 1" in m for _, _, m in run.log)
 
 
@@ -119,6 +121,18 @@ def test_failed_points_are_exit_4_and_a_resume_remeasures_them(
     assert last.startswith("finished with failed points: 1 of 12 points failed")
     assert read_run(part).status == "failed"
     assert read_run(part).attrs["outcome"].startswith("finished with failed points: 1 of 12")
+    # a resume removes the earlier outcome until its own close; one killed before then and
+    # repaired says so (a reviewer: status aborted beside "finished with failed points")
+    copy = tmp_path / "killed.h5"
+    copy.write_bytes(part.read_bytes())
+    from daq.store.repair import repair_run
+    from protocols.runfile import RunFileWriter
+
+    RunFileWriter.open_existing(copy, resumed=True)  # never closed: a resume killed
+    assert "outcome" not in read_run(copy).attrs
+    repair_run(copy)
+    killed = read_run(copy)
+    assert killed.status == "aborted" and killed.attrs["outcome"].endswith("(repaired)")
     # the dry run of the resume says what it will measure, not the whole plan (12 points)
     assert rp.main([str(proto_file), "--resume", str(part), "--dry-run"]) == 0
     assert ": 1 of 12 points to measure, estimated" in capsys.readouterr().out
