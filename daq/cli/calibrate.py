@@ -90,13 +90,20 @@ def run(args: argparse.Namespace) -> int:
 def _refuse_existing(out: Path) -> None:
     """A chain file (or its ``.json`` beside it) already there is not overwritten: it may be a
     hand-made chain or an earlier fit."""
-    from daq.store.run_store import free_name
-
     for target in (out, out.with_suffix(".json")):
         if target.exists() and not target.is_dir():
-            raise CliError(
-                f"--out: {target} exists already; write a new file (--out {free_name(out)})"
-            )
+            raise CliError(f"--out: {target} exists already; write a new file (--out {_free(out)})")
+
+
+def _free(out: Path) -> Path:
+    """The first ``NAME_2.yaml``, ``NAME_3.yaml``... beside ``out`` whose ``.json`` is free too
+    (a chain file; run_store's free name gave ``.h5`` to a name without a suffix)."""
+    suffix = out.suffix or ".yaml"
+    for k in range(2, 10_000):
+        cand = out.with_name(f"{out.stem}_{k}{suffix}")
+        if not cand.exists() and not cand.with_suffix(".json").exists():
+            return cand
+    return out.with_name(f"{out.stem}_new{suffix}")
 
 
 def _check(data, spec, result, figures: Path | None) -> dict[str, float | None]:  # type: ignore[no-untyped-def]

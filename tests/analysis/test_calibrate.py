@@ -141,6 +141,14 @@ def test_cli_does_not_overwrite_a_chain_file(
     assert rc == 2 and len(err.splitlines()) == 1, err
     assert f"{kept} exists already" in err and "my_chain_2.yaml" in err
     assert kept.read_text() == "# my own chain\n"
+    # the name offered is free with its .json too, and a chain file's (a reviewer: .h5)
+    (tmp_path / "my_chain_2.json").write_text("{}")
+    bare = tmp_path / "chainout"
+    bare.write_text("x")
+    assert biafc(["calibrate", str(measured), "--fit", "F0", "--out", str(out), "--no-check"]) == 2
+    assert "--out " + str(tmp_path / "my_chain_3.yaml") in capsys.readouterr().err
+    assert biafc(["calibrate", str(measured), "--fit", "F0", "--out", str(bare), "--no-check"]) == 2
+    assert "chainout_2.yaml" in capsys.readouterr().err
 
 
 def test_cli_refusal_is_one_line_with_exit_2(
