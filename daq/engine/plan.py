@@ -94,6 +94,7 @@ def make_plan(pf: ProtocolFile, bf: BenchFile) -> Plan:
     n = bench.n_cylinders
     chain = _model_chain(bf)  # once: the window plans on every pause in typing
     _check_model_cylinders(bf, chain)
+    _check_simulated_stage(bf)
     cyl = proto.cylinder_numbers(n)
     bad = [int(c) for c in cyl if not 1 <= c <= n]
     if bad:
@@ -296,6 +297,26 @@ def _model_chain(bf: BenchFile) -> Any:
     from sim_backend import dem
 
     return dem.build_chain(chain_spec(bf))
+
+
+def _check_simulated_stage(bf: BenchFile) -> None:
+    """A simulated bench's stage microstep is the simulated stage's: another one (a bench
+    written for another stage, with only ``microstep`` given) put every cylinder where the
+    laser was not, and every point failed with its signal lost (a reviewer)."""
+    stage = bf.bench.stage
+    if bf.bench.simulation is None or stage.microstep is None:
+        return
+    from sim_backend.emulators.zaber import STAGE_MODELS
+    from sim_backend.simbench.emulated import SIMULATED_STAGE
+
+    full_step = STAGE_MODELS[SIMULATED_STAGE][1]
+    if not math.isclose(stage.microstep * stage.resolution, full_step, rel_tol=1e-6):
+        raise bf.doc.error(
+            ("stage", "microstep"),
+            f"{stage.microstep * 1e6:.6g} um at resolution {stage.resolution} is not the "
+            f"simulated stage's ({full_step / stage.resolution * 1e6:.6g} um: the simulated "
+            f"bench moves an {SIMULATED_STAGE})",
+        )
 
 
 def _check_model_cylinders(bf: BenchFile, chain: Any) -> None:

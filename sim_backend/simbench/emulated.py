@@ -31,6 +31,9 @@ if TYPE_CHECKING:
 
 __all__ = ["INSTRUMENTS", "EmulatedInstruments", "WorldTransport"]
 
+#: the stage the simulated bench moves (the Zaber emulator's model, at its resolution 64)
+SIMULATED_STAGE = "X-LSM500A"
+
 INSTRUMENTS: tuple[str, ...] = ("generator", "vibrometer", "stage")
 #: default transport timeouts (s, simulated)
 TIMEOUT_S = {"generator": 5.0, "vibrometer": 2.0, "stage": 2.0}
@@ -95,7 +98,10 @@ class EmulatedInstruments:
             else PolytecEmulator()
         )
         self.stage = ZaberEmulator(
-            self.clock, travel_m=cfg.stage_travel_m, speed_m_per_s=cfg.stage_speed_m_per_s
+            self.clock,
+            model=SIMULATED_STAGE,
+            travel_m=cfg.stage_travel_m,
+            speed_m_per_s=cfg.stage_speed_m_per_s,
         )
         self._emulators: dict[str, Any] = {
             "generator": self.generator,
