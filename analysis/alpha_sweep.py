@@ -252,10 +252,11 @@ def format_alpha_sweep(result: AlphaSweepResult) -> str:
         for d in result.output_Hz:
             fd = result.fractional_detuning(d)[i] * 100
             ed = result.expected_fractional_detuning(d)[i] * 100
+            peak = result.output_Hz[d][i]  # none inside the search range: "-", as elsewhere
+            shown = f"{peak / 1e3:9.3f} {fd:7.2f}" if np.isfinite(peak) else f"{'-':>9} {'-':>7}"
             lines.append(
                 f"{alpha:6.3f} {result.alpha_actual[i]:6.3f} {d:4} "
-                f"{result.output_Hz[d][i] / 1e3:9.3f} {fd:7.2f} {ed:7.2f} "
-                f"{result.transmission[d][i]:10.3g}"
+                f"{shown} {ed:7.2f} {result.transmission[d][i]:10.3g}"
             )
     return "\n".join(lines)
 

@@ -172,7 +172,12 @@ def write_figures(run: RunData, out_dir: str | Path) -> FigureReport:
 
     if sweeps:
         _save(report, plot_amplitude_sweep(sweeps), out, "amplitude_sweep")
-        _save(report, plot_regime(sweeps), out, "regime")
+        if any(np.isfinite(sw.transmission).any() for sw in sweeps.values()):
+            _save(report, plot_regime(sweeps), out, "regime")
+        else:  # its log axes had nothing to draw ("Data cannot be log-scaled")
+            report.skipped["regime"] = (
+                "no far/near ratio: the entry cylinder was not measured at any amplitude"
+            )
         for direction, why in sweep_why.items():
             report.skipped[f"amplitude_sweep ({direction})"] = why
             report.skipped[f"regime ({direction})"] = why

@@ -19,7 +19,10 @@ its own pre-trigger samples is ``"none"``, and says so (``at_noise_floor``, its 
 only as an upper bound, no output peak): nothing passed that the bench could see. When the
 linear reference is itself at the noise floor, every gain is a lower bound; a point that stands
 above the noise and has moved from the input, but whose lower bound stays below ``GAIN_MIN``,
-is ``"undetermined"``: the run cannot tell whether the nonlinearity let it through.
+is ``"undetermined"``: the run cannot tell whether the nonlinearity let it through. A point
+above the noise without a line inside the search range (its largest value on the range's edge)
+is ``"undetermined"`` when it passes by the energy rule (or may, its gain a lower bound), else
+``"none"``.
 
 Why a gain and not a level: a short burst is broad, and in the linear regime its tail near the
 frequency where the end cylinders' bands nearly meet leaks through (about 1e-3 of the energy
@@ -112,9 +115,12 @@ def summary_rows(sweep: AmplitudeSweep, scan: ScanData | None = None) -> list[di
         if floor:
             verdict = "none"
         elif measured and not math.isfinite(float(sweep.output_Hz[a])):
-            # measured, no line inside the search range (its largest value on an edge)
-            passes = math.isfinite(gain) and gain >= GAIN_MIN
-            verdict = "undetermined" if passes else "none"
+            # measured, no line inside the search range (its largest value on an edge): it
+            # passed (or may have: a lower-bound gain) but no converted line can be named
+            tr = float(sweep.transmission[a])
+            passes = gain >= GAIN_MIN if math.isfinite(gain) else tr >= TRANSMISSION_MIN
+            maybe = sweep.reference_is_bound and math.isfinite(gain)
+            verdict = "undetermined" if passes or maybe else "none"
         elif verdict == "none" and sweep.reference_is_bound and math.isfinite(gain):
             moved = abs(detuning) >= DETUNING_MIN_FRACTION * float(sweep.input_Hz[a])
             verdict = "undetermined" if moved and gain < GAIN_MIN else verdict
@@ -222,8 +228,9 @@ def format_summary(summary: dict[str, Any]) -> str:
         )
     for direction in summary.get("noise_unknown", []):
         lines.append(
-            f"{direction}: no noise estimate (its records have no pre-trigger samples: "
-            "acquisition.pre_trigger); a far end at the noise floor cannot be told from a signal"
+            f"{direction}: no noise estimate (its records have fewer than 16 pre-trigger "
+            "samples: acquisition.pre_trigger); a far end at the noise floor cannot be told "
+            "from a signal"
         )
     for name, why in summary.get("figures_left_out", {}).items():
         lines.append(f"left out {name}: {why}")

@@ -250,6 +250,8 @@ class KeysightGenerator:
         if clear is not None:
             try:
                 clear()
+            except InstrumentTimeout:  # a dead link: said now, not after *IDN? times out too
+                raise
             except InstrumentError as exc:  # pyvisa-py has no device clear on USB or ASRL
                 log.info("%s: no device clear at connect (%s)", self.transport.name, exc)
         self.transport.write("*CLS")

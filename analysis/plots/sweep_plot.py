@@ -142,11 +142,14 @@ def plot_amplitude_sweep(sweeps: Mapping[str, AmplitudeSweep]) -> Figure:
                 f_in = float(np.nanmedian(sw.input_Hz))
                 if np.isfinite(sw.expected_Hz):  # none without a local-resonance band
                     ax.axvline((sw.expected_Hz - f_in) / 1e3, color=colour, ls=":", lw=1.5)
-                if _log_amplitudes(sw.amplitudes):
-                    a = sw.amplitudes / f  # the limits first: with no point drawn (every far
-                    # record at the noise floor) the log scale had no data and failed
-                    ax.set_ylim(float(a.min()) / 1.5, float(a.max()) * 1.5)
-                    ax.set_yscale("log")
+            every = np.concatenate(
+                [sweeps[d].amplitudes / (factor if same else 1.0) for d in order]
+            )
+            if _log_amplitudes(every):  # the limits from every direction, before the scale:
+                # with no point drawn (every far record at the noise floor) the log scale had
+                # no data and failed
+                ax.set_ylim(float(every.min()) / 1.5, float(every.max()) * 1.5)
+                ax.set_yscale("log")
             ax.set_xlabel("detuning f_out - f_in (kHz)")
             ax.set_ylabel(f"drive amplitude ({unit})" if same else "drive amplitude")
             ax.set_title("detuning; ×: transmission gain")

@@ -102,10 +102,11 @@ def outcome_text(result: Any) -> str:
     status = str(result.status)
     if status == "complete":
         return "complete"
-    if getattr(result, "points_failed_only", False):
-        return str(result.reason)
-    if status == "unsafe":  # with what to switch off, as the last line says it
+    if status == "unsafe":  # first (failed points before an unsafe end hid it); with what to
+        # switch off, as the last line says it
         why = f" ({result.reason})" if result.reason else ""
         unconfirmed = tuple(getattr(result, "unconfirmed", ()) or ())
         return f"run UNSAFE{why}" + (f": {unsafe_instruction(unconfirmed)}" if unconfirmed else "")
+    if getattr(result, "points_failed_only", False):
+        return str(result.reason)
     return f"run {status}: {result.reason}" if result.reason else f"run {status}"

@@ -304,12 +304,20 @@ def _check_simulated_stage(bf: BenchFile) -> None:
     written for another stage, with only ``microstep`` given) put every cylinder where the
     laser was not, and every point failed with its signal lost (a reviewer)."""
     stage = bf.bench.stage
-    if bf.bench.simulation is None or stage.microstep is None:
+    if bf.bench.simulation is None:
         return
     from sim_backend.emulators.zaber import STAGE_MODELS
-    from sim_backend.simbench.emulated import SIMULATED_STAGE
+    from sim_backend.simbench.emulated import SIMULATED_RESOLUTION, SIMULATED_STAGE
 
+    if stage.resolution != SIMULATED_RESOLUTION:  # refused at connect, after the dry run
+        raise bf.doc.error(
+            ("stage", "resolution"),
+            f"{stage.resolution} microsteps a step, but the simulated {SIMULATED_STAGE} runs "
+            f"at {SIMULATED_RESOLUTION}",
+        )
     full_step = STAGE_MODELS[SIMULATED_STAGE][1]
+    if stage.microstep is None:
+        return
     if not math.isclose(stage.microstep * stage.resolution, full_step, rel_tol=1e-6):
         raise bf.doc.error(
             ("stage", "microstep"),

@@ -834,8 +834,8 @@ class MainWindow(QMainWindow):
                 "QLabel { color: #b00000; font-weight: bold; }"
             )
             self.bench_panel.status_label.setText(
-                "✗ UNSAFE: the generator's outputs were not confirmed off; switch them off by "
-                "hand (the run's last line says which)"
+                "✗ UNSAFE: the safe state was not confirmed; switch off by hand what the "
+                "run's last line names"
             )
         if self.last_result is not None:  # the process's status is the last run's, as
             from daq.engine.outcome import exit_code  # run_protocol's (0 when it completed)

@@ -31,8 +31,9 @@ if TYPE_CHECKING:
 
 __all__ = ["INSTRUMENTS", "EmulatedInstruments", "WorldTransport"]
 
-#: the stage the simulated bench moves (the Zaber emulator's model, at its resolution 64)
+#: the stage the simulated bench moves (the Zaber emulator's model) and its resolution
 SIMULATED_STAGE = "X-LSM500A"
+SIMULATED_RESOLUTION = 64
 
 INSTRUMENTS: tuple[str, ...] = ("generator", "vibrometer", "stage")
 #: default transport timeouts (s, simulated)
@@ -100,6 +101,7 @@ class EmulatedInstruments:
         self.stage = ZaberEmulator(
             self.clock,
             model=SIMULATED_STAGE,
+            resolution=SIMULATED_RESOLUTION,
             travel_m=cfg.stage_travel_m,
             speed_m_per_s=cfg.stage_speed_m_per_s,
         )

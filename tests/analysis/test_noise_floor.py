@@ -4,6 +4,7 @@ shipped sweep's figures calling the RTL conversion at 5 um "none": its linear re
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -160,6 +161,15 @@ def test_a_measured_point_without_a_peak_inside_the_range_is_not_unmeasured(
     edged = dataclasses.replace(sweep, output_Hz=no_peak, detuning_Hz=no_peak - sweep.input_Hz)
     row = summary_rows(edged, run.scans["ltr"])[2]
     assert row["transmission"] is not None and row["conversion"] == "undetermined"
+    # with no linear reference the energy rule decides, as everywhere (a reviewer)
+    alone = dataclasses.replace(
+        edged, transmission_gain=np.full(3, np.nan), reference=np.nan, reference_is_bound=False
+    )
+    tr = float(alone.transmission[2])
+    want = "undetermined" if tr >= 1e-2 else "none"
+    assert summary_rows(alone, run.scans["ltr"])[2]["conversion"] == want == "undetermined"
+    quiet = dataclasses.replace(alone, transmission=np.where(np.arange(3) == 2, 1e-4, np.nan))
+    assert summary_rows(quiet, run.scans["ltr"])[2]["conversion"] == "none"
 
 
 def test_a_run_without_pre_trigger_says_it_has_no_noise_estimate(tmp_path: Path) -> None:
@@ -171,6 +181,41 @@ def test_a_run_without_pre_trigger_says_it_has_no_noise_estimate(tmp_path: Path)
     assert run_protocol([str(protocol), "--out", str(out), "-q"]) == 0
     summary = summarize(read_run(out))
     assert summary["noise_unknown"] == ["ltr", "rtl"]
-    assert "ltr: no noise estimate (its records have no pre-trigger samples" in format_summary(
+    assert "ltr: no noise estimate (its records have fewer than 16 pre-trigger" in format_summary(
         summary
     )
+
+
+def test_the_detuning_panel_holds_every_directions_amplitudes(small_sweep: Path) -> None:
+    """A reviewer: the panel's range was set per direction, so the last one's won and hid the
+    other's points."""
+    import dataclasses
+
+    from analysis.plots.sweep_plot import plot_amplitude_sweep
+
+    run = read_run(small_sweep)
+    ltr = amplitude_sweep(run.scans["ltr"], run.chain)
+    rtl = amplitude_sweep(run.scans["rtl"], run.chain)
+    rtl = dataclasses.replace(rtl, amplitudes=rtl.amplitudes * 100)  # 1 um to 500 um
+    fig = plot_amplitude_sweep({"ltr": ltr, "rtl": rtl})
+    panel = next(ax for ax in fig.axes if ax.get_xlabel().startswith("detuning"))
+    low, high = panel.get_ylim()
+    assert low < 10e-9 * 1e6 and high > 500e-6 * 1e6  # in um, both directions inside
+
+
+def test_a_sweep_without_its_entry_cylinder_leaves_the_regime_figure_out(tmp_path: Path) -> None:
+    """A reviewer: with no far/near ratio at all (the entry cylinder not scanned) the regime
+    figure's log axes had nothing and biafc figures ended in "Data cannot be log-scaled"."""
+    from daq.cli.biafc import main as biafc
+
+    protocol = tmp_path / "far_only.yaml"
+    protocol.write_text(
+        PROTOCOL.replace("directions: both", "directions: [ltr]").replace(
+            "cylinders: [1, 31]", "cylinders: [16, 31]"
+        )
+    )
+    out = tmp_path / "far_only.h5"
+    assert run_protocol([str(protocol), "--out", str(out), "-q"]) == 0
+    assert biafc(["figures", str(out), "--out", str(tmp_path / "f")]) == 0
+    summary = json.loads((tmp_path / "f" / "summary.json").read_text())
+    assert "entry cylinder was not measured" in summary["figures_left_out"]["regime"]

@@ -439,3 +439,20 @@ def test_out_naming_a_file_another_run_writes_says_so_not_resume_it(tmp_path) ->
     finally:
         lock.release()
         w.close("aborted")
+
+
+def test_an_unsafe_end_after_failed_points_still_says_unsafe_and_what_to_switch_off() -> None:
+    """A reviewer: the outcome checked "finished with failed points" before "unsafe", so such a
+    run's last line, the window and the file lost UNSAFE and SWITCH OFF BY HAND."""
+    from types import SimpleNamespace
+
+    from daq.engine.outcome import exit_code, final_line, outcome_text
+
+    result = SimpleNamespace(
+        status="unsafe", reason="safe state not confirmed after the run ended failed: "
+        "finished with failed points: 2 of 10 points failed", points_failed_only=True,
+        unconfirmed=("generator output 1",), safe_state_s=None, path="r.h5",
+    )  # fmt: skip
+    assert exit_code(result) == ExitCode.UNSAFE
+    for text in (final_line(result), outcome_text(result)):
+        assert text.startswith("run UNSAFE (") and "SWITCH OFF BY HAND: generator output 1" in text

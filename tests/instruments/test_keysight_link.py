@@ -85,6 +85,21 @@ def test_connect_goes_on_where_the_session_has_no_device_clear() -> None:
     assert KeysightGenerator(link, LIMITS).connect().count(",") == 3
 
 
+def test_a_device_clear_that_times_out_ends_the_connect_at_once() -> None:
+    """A dead link is said at the clear, not logged as "no device clear" and then met again
+    at *IDN? after a second timeout (a reviewer)."""
+    emu = KeysightEmulator()
+    link = SimTransport(emu, "generator", 2.0, SimClock())
+
+    def dead() -> None:
+        raise InstrumentTimeout("generator: no reply to 'device clear' within 2 s")
+
+    link.clear = dead  # type: ignore[method-assign]
+    with pytest.raises(InstrumentTimeout, match="device clear"):
+        KeysightGenerator(link, LIMITS).connect()
+    assert emu.commands == []  # nothing sent after it
+
+
 def test_connect_clears_a_stale_error_queue() -> None:
     gen, emu = on_emulator()
     emu.push_error(-350, "Queue overflow")  # left over from the last session
