@@ -502,20 +502,25 @@ class RunFileWriter:
         path = Path(path)
         _check_format(path)
         f = h5py.File(path, "r+", libver="latest")
-        f.attrs["status"] = "running"
-        if "outcome" in f.attrs:  # the earlier session's: this one's is written at its close
-            del f.attrs["outcome"]
-        if resumed:
-            f.attrs["resumed"] = now_iso()
-            _require_file_fields(f)
-            for g in f["scan"].values():
-                if isinstance(g, h5py.Group) and "done" in g:
-                    _require_point_fields(g)
-        for key, value in (extra_attrs or {}).items():
-            f.attrs[key] = value
-        f.flush()
-        if swmr:
-            f.swmr_mode = True
+        try:  # what can fail first, the status last: a failed re-open leaves it as it was
+            if resumed:
+                _require_file_fields(f)
+                for g in f["scan"].values():
+                    if isinstance(g, h5py.Group) and "done" in g:
+                        _require_point_fields(g)
+            for key, value in (extra_attrs or {}).items():
+                f.attrs[key] = value
+            f.attrs["status"] = "running"
+            if "outcome" in f.attrs:  # the earlier session's: this one's is written at its close
+                del f.attrs["outcome"]
+            if resumed:
+                f.attrs["resumed"] = now_iso()
+            f.flush()
+            if swmr:
+                f.swmr_mode = True
+        except BaseException:
+            f.close()  # not left open in the process (a reviewer)
+            raise
         return cls(path, f)
 
     # -- writing --------------------------------------------------------------------------

@@ -257,3 +257,22 @@ def test_a_vibrometer_dead_at_an_arming_ends_the_run_at_its_first_timeout(
     smoke = Path(__file__).resolve().parents[2] / "protocols" / "smoke.yaml"
     assert rp.main([str(smoke), "--out", str(tmp_path / "s.h5"), "--quiet"]) == 1
     assert seen["timeouts"] == ["Get,VeloDec,1,Name"]
+
+
+def test_a_reopen_that_fails_leaves_the_files_status_and_outcome(
+    protocol, bench, out: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A reviewer: the re-open wrote status "running" and removed the outcome before the steps
+    that can fail, so a resume refused there left the file "running" (and open)."""
+    import protocols.runfile as runfile
+
+    _run(protocol, bench, out, FakeWorld(faults=Faults(nan_reads=3)))
+
+    def full(f: Any) -> None:
+        raise OSError("No space left on device")
+
+    monkeypatch.setattr(runfile, "_require_file_fields", full)
+    with pytest.raises(OSError, match="No space left"):
+        runfile.RunFileWriter.open_existing(out, resumed=True)
+    with h5py.File(out, "r") as f:
+        assert f.attrs["status"] == "failed" and f.attrs["outcome"].startswith("finished with")
