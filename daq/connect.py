@@ -24,6 +24,7 @@ validation) works where a driver stack is not installed.
 
 from __future__ import annotations
 
+import contextlib
 import importlib
 from collections.abc import Mapping
 from pathlib import Path
@@ -239,31 +240,29 @@ def connect_bench(
 def _connect_hardware(b: BenchSpec, chain: Any, locks: Any) -> BenchInstruments:
     """The lab bench's drivers on real transports and the NI digitiser (its locks held)."""
     open_transport = _import("instruments.transport", "open_transport")
-    transports = {
-        "generator": open_transport(
-            b.generator.resource,
-            name="generator",
-            timeout_s=b.generator.timeout,
-            baud_rate=b.generator.baud_rate,
-            visa_backend=b.visa_backend,
-        ),
-        "vibrometer": open_transport(
-            b.vibrometer.resource,
-            name="vibrometer",
-            timeout_s=b.vibrometer.timeout,
-            baud_rate=b.vibrometer.baud_rate,
-            visa_backend=b.visa_backend,
-        ),
-        "stage": open_transport(
-            b.stage.resource,
-            name="stage",
-            timeout_s=b.stage.timeout,
-            baud_rate=b.stage.baud_rate,
-            visa_backend=b.visa_backend,
-        ),
+    links = {
+        "generator": (b.generator.resource, b.generator.timeout, b.generator.baud_rate),
+        "vibrometer": (b.vibrometer.resource, b.vibrometer.timeout, b.vibrometer.baud_rate),
+        "stage": (b.stage.resource, b.stage.timeout, b.stage.baud_rate),
     }
-    generator, vibrometer, stage = build_drivers(b, transports)
-    digitiser = _import("daq.digitiser_nidaq", "NidaqDigitiser")(
-        b.daq.device, max_rate_Hz=b.daq.max_rate, terminal_config=b.daq.terminal_config
-    )
+    transports: dict[str, Any] = {}
+    try:
+        for name, (resource, timeout_s, baud_rate) in links.items():
+            transports[name] = open_transport(
+                resource,
+                name=name,
+                timeout_s=timeout_s,
+                baud_rate=baud_rate,
+                visa_backend=b.visa_backend,
+            )
+        generator, vibrometer, stage = build_drivers(b, transports)
+        digitiser = _import("daq.digitiser_nidaq", "NidaqDigitiser")(
+            b.daq.device, max_rate_Hz=b.daq.max_rate, terminal_config=b.daq.terminal_config
+        )
+    except BaseException:  # every link opened so far is closed: a COM port held by a failed
+        # connect refused the window's next Connect ("Access is denied"; a second reader)
+        for transport in transports.values():
+            with contextlib.suppress(Exception):
+                transport.close()
+        raise
     return BenchInstruments(generator, vibrometer, stage, digitiser, chain, "hardware", locks=locks)

@@ -188,7 +188,9 @@ class StageSpec(_Model):
     device_id: int | None = None
     speed: Velocity = 0.025
     settle: Duration = 0.2  # wait after each move (the simulated stage settles as long)
-    timeout: Duration = 60.0
+    #: the longest wait for one reply of the controller (a move's and homing's own bounds
+    #: come from the distance and speed); it was 60 s, which a dead stage cost per reply
+    timeout: Duration = 2.0
     baud_rate: int = Field(default=SERIAL_BAUD_DEFAULT, gt=0)
 
     @field_validator("soft_limits")

@@ -15,6 +15,12 @@ __all__ = ["VisaTransport"]
 _CHECK = "check that the instrument is on, its address in the bench file and the cable or network"
 
 
+def _one_line(exc: BaseException) -> str:
+    """An exception's text on one line: pyvisa-py's messages hold line breaks, and the command
+    line shows the first line only, which lost the reason and the hint after it."""
+    return " ".join(str(exc).split())
+
+
 def _open_hint(resource: str, backend: str, why: str) -> str | None:
     """What to change when pyvisa-py cannot open ``resource`` for a reason of its own."""
     if backend != "@py":
@@ -77,14 +83,20 @@ class VisaTransport:
             rm = resource_manager or pyvisa.ResourceManager(backend)
         except (OSError, ValueError) as exc:
             raise DriverNotInstalledError(
-                f"{self.name}: VISA backend {backend!r} not available ({exc})"
+                f"{self.name}: VISA backend {backend!r} not available ({_one_line(exc)}); "
+                + (
+                    "install the NI-VISA or Keysight IO Libraries on this PC, or set "
+                    "visa_backend: '@py' in the bench file (pyvisa-py, shipped)"
+                    if backend != "@py"
+                    else "reinstall pyvisa-py (pip install pyvisa-py)"
+                )
             ) from None
         try:
             res: Any = rm.open_resource(resource)
             self._res: Any = res
         except Exception as exc:  # pyvisa raises several types for a bad/unknown resource
             raise InstrumentError(
-                f"{self.name}: cannot open VISA resource ({exc}); "
+                f"{self.name}: cannot open VISA resource ({_one_line(exc)}); "
                 + (_open_hint(resource, backend, str(exc)) or _CHECK)
             ) from None
         self.timeout_s = float(timeout_s)
@@ -129,14 +141,17 @@ class VisaTransport:
                 raise InstrumentTimeout(
                     f"{self.name}: no reply to {what!r} within {self.timeout_s:g} s"
                 ) from None
-            raise InstrumentError(f"{self.name}: {what!r} failed ({exc}); {_CHECK}") from None
+            raise InstrumentError(
+                f"{self.name}: {what!r} failed ({_one_line(exc)}); {_CHECK}"
+            ) from None
         except OSError as exc:  # ConnectionRefusedError, BrokenPipeError, reset: a dead link
             if isinstance(exc, TimeoutError):
                 raise InstrumentTimeout(
                     f"{self.name}: no reply to {what!r} within {self.timeout_s:g} s"
                 ) from None
             raise InstrumentError(
-                f"{self.name}: link lost at {what!r} ({type(exc).__name__}: {exc}); {_CHECK}"
+                f"{self.name}: link lost at {what!r} ({type(exc).__name__}: {_one_line(exc)}); "
+                f"{_CHECK}"
             ) from None
 
     def clear(self) -> None:

@@ -76,6 +76,32 @@ def test_a_missing_driver_is_one_line(monkeypatch: pytest.MonkeyPatch) -> None:
         connect_bench(ROOT / "lab_bench.yaml")
 
 
+def test_a_failed_connect_closes_every_link_it_opened(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A second reader: with the NI driver missing, the three links stayed open; the window's
+    next Connect then met a COM port still held ("Access is denied" on Windows)."""
+    import sys
+
+    import instruments.transport
+
+    closed: list[str] = []
+
+    class Link:
+        def __init__(self, resource: str, **kw: Any) -> None:
+            self.name = kw["name"]
+
+        def close(self) -> None:
+            closed.append(self.name)
+
+    monkeypatch.setitem(sys.modules, "daq.digitiser_nidaq", None)  # import fails
+    monkeypatch.setattr(
+        daq.connect, "build_drivers", lambda b, transports, clock=None: (None, None, None)
+    )
+    monkeypatch.setattr(instruments.transport, "open_transport", Link)
+    with pytest.raises(daq.connect.ConnectError):
+        connect_bench(ROOT / "lab_bench.yaml")
+    assert closed == ["generator", "vibrometer", "stage"]
+
+
 def test_the_bench_files_level_full_scale_reaches_the_vibrometer(tmp_path) -> None:  # type: ignore[no-untyped-def]
     """``vibrometer.level_full_scale`` (a controller reading 0-775, say) is what the driver
     divides by; before, the bench file refused the key and the driver kept 100."""
@@ -127,3 +153,11 @@ def test_the_bench_files_visa_backend_reaches_every_transport(
     )
     connect_bench(parse_bench(text, str(ROOT / "lab_bench.yaml")))
     assert seen == ["@ivi"] * 3
+
+
+def test_a_stages_reply_is_waited_for_seconds_not_a_minute() -> None:
+    """A second reader: stage.timeout (60 s, documented "per move") was the wait for every
+    reply, so a dead stage cost a minute at connect, at each poll and at the safe state; a
+    move's own bound comes from its distance and speed."""
+    spec = load_bench(ROOT / "lab_bench.yaml").bench
+    assert spec.stage.timeout == 2.0 == spec.vibrometer.timeout

@@ -51,3 +51,28 @@ def test_unknown_resource_is_a_clear_error() -> None:
         open_transport("no-such-port", name="stage")
     with pytest.raises(InstrumentError, match="empty instrument resource"):
         open_transport("  ", name="vibrometer")
+
+
+def test_a_visa_library_that_is_not_installed_is_said_in_one_line_with_what_to_do() -> None:
+    """A second reader: pyvisa's message holds line breaks, the command line shows the first
+    line only, and "VISA backend '@ivi' not available (Could not open VISA library:" was all a
+    physicist read, without the reason or what to do."""
+    from instruments.errors import DriverNotInstalledError
+    from instruments.transport.visa import VisaTransport
+
+    class NoLibrary:
+        def __call__(self, backend: str) -> None:
+            raise OSError("Could not open VISA library:\n  no library found at ...\n")
+
+    import pyvisa
+
+    real = pyvisa.ResourceManager
+    pyvisa.ResourceManager = NoLibrary()  # type: ignore[misc,assignment]
+    try:
+        with pytest.raises(DriverNotInstalledError) as caught:
+            VisaTransport("TCPIP::10.0.0.9::INSTR", name="generator", backend="@ivi")
+    finally:
+        pyvisa.ResourceManager = real  # type: ignore[misc]
+    text = str(caught.value)
+    assert "\n" not in text and "no library found" in text
+    assert "install the NI-VISA or Keysight IO Libraries" in text
