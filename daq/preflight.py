@@ -96,7 +96,8 @@ def _generator(bf: BenchFile, gen: Any) -> list[Finding]:
         )
     )
     out.append(Finding("generator", "firmware", "", firmware, "info"))
-    errors = gen.errors()
+    # what the queue held when the bench connected (its connect clears it) and since
+    errors = [*getattr(gen, "errors_at_connect", []), *gen.errors()]
     out.append(
         Finding(
             "generator",

@@ -208,6 +208,8 @@ class KeysightGenerator:
         self._configs: dict[int, BurstConfig] = {}
         self._readback: dict[int, ChannelReadback] = {}
         self._idn: str | None = None
+        #: what SYST:ERR? held when the bench connected, before its *CLS (``biafc check``)
+        self.errors_at_connect: list[str] = []
 
     # --- link -------------------------------------------------------------------------------
     def _query(self, command: str) -> str:
@@ -244,8 +246,10 @@ class KeysightGenerator:
     def connect(self) -> str:
         """Device clear (a reply that an earlier session left unread is dropped: ``*CLS``
         clears the error queue, not the output queue; skipped where the VISA session has none,
-        as pyvisa-py's USB and serial sessions), ``*CLS`` (a stale error queue), ``*IDN?``;
-        returns the identity."""
+        as pyvisa-py's USB and serial sessions), the errors left in the queue kept as
+        :attr:`errors_at_connect` (``biafc check`` shows them), ``*CLS``, ``*IDN?``; returns
+        the identity. An instrument that is not a 33500/33600 is refused
+        (:class:`InstrumentError`): a run configured and switched on whatever answered."""
         clear = getattr(self.transport, "clear", None)
         if clear is not None:
             try:
@@ -254,8 +258,16 @@ class KeysightGenerator:
                 raise
             except InstrumentError as exc:  # pyvisa-py has no device clear on USB or ASRL
                 log.info("%s: no device clear at connect (%s)", self.transport.name, exc)
+        self.errors_at_connect = self.errors()
         self.transport.write("*CLS")
-        return self.identify()
+        idn = self.identify()
+        fields = [p.strip() for p in idn.split(",")]
+        if not fields[1].upper().startswith(("335", "336")):
+            raise InstrumentError(
+                f"{self.transport.name} answers as {fields[0]} {fields[1]}, not a Keysight "
+                "33500B/33600A: check generator.resource"
+            )
+        return idn
 
     def identity(self) -> dict[str, Any]:
         """Identity and, per channel, the output load as the instrument reports it (ohm;

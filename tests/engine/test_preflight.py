@@ -241,3 +241,22 @@ def test_the_carrier_of_a_burst_played_at_another_rate_is_measured(rate: float, 
     assert measured_carrier_Hz(x, rate, Burst(f_c, cycles=5)) == pytest.approx(played, rel=1e-6)
     noisy = x + np.random.default_rng(1).normal(0.0, 1e-3, x.size)
     assert measured_carrier_Hz(noisy, rate, Burst(f_c, cycles=5)) == pytest.approx(played, rel=3e-4)
+
+
+def test_check_shows_the_errors_the_generator_held_when_it_connected(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A second reader: the connect's *CLS emptied the queue before the check read it, so the
+    row always said "empty"."""
+    from sim_backend.emulators import keysight
+
+    made = keysight.KeysightEmulator.__init__
+
+    def left_by_someone(self: Any, *a: Any, **k: Any) -> None:
+        made(self, *a, **k)
+        self.push_error(-222, "Data out of range")
+
+    monkeypatch.setattr(keysight.KeysightEmulator, "__init__", left_by_someone)
+    assert main(["check"]) == 1
+    out = capsys.readouterr().out
+    assert re.search(r"MISMATCH generator error queue: -222,\"?Data out of range", out), out

@@ -100,6 +100,19 @@ def test_a_device_clear_that_times_out_ends_the_connect_at_once() -> None:
     assert emu.commands == []  # nothing sent after it
 
 
+def test_connect_refuses_an_instrument_that_is_not_a_33500_or_33600(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A second reader: connect checked only that *IDN? had four fields, so a run configured
+    and switched on whatever answered at generator.resource."""
+    import sim_backend.emulators.keysight as emulated
+
+    monkeypatch.setattr(emulated, "IDN", "TEKTRONIX,AFG31022,C012345,FV:1.5.2")
+    gen, _ = on_emulator()
+    with pytest.raises(InstrumentError, match="answers as TEKTRONIX AFG31022, not a Keysight"):
+        gen.connect()
+
+
 def test_connect_clears_a_stale_error_queue() -> None:
     gen, emu = on_emulator()
     emu.push_error(-350, "Queue overflow")  # left over from the last session
