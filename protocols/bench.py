@@ -262,6 +262,26 @@ class DaqSpec(_Model):
         "reference_range": Bound(0.0, 100.0, "voltage"),
     }
 
+    @model_validator(mode="after")
+    def _channels_on_the_device(self) -> DaqSpec:
+        """Both inputs on ``device`` (whose rate ceiling and lock they use) and apart: on the NI
+        path a typo
+        (``Dev2/ai0`` beside ``device: Dev1``) failed only at the first record, its error
+        naming the field that was right (a second reader; the simulated digitiser refused it)."""
+        dev = self.device.strip().lower()
+        for name, channel in (
+            ("velocity_channel", self.velocity_channel),
+            ("reference_channel", self.reference_channel),
+        ):
+            if channel.strip().lower().partition("/")[0] != dev:
+                raise ValueError(f"{name}: {channel!r} is not on daq.device {self.device!r}")
+        if self.velocity_channel.strip().lower() == self.reference_channel.strip().lower():
+            raise ValueError(
+                f"reference_channel: {self.reference_channel!r} is the velocity channel too; "
+                "give each input its own"
+            )
+        return self  # the trigger may be routed from another device (RTSI, PXI): not checked
+
 
 class PositionGrid(_Model):
     first: Length
