@@ -110,6 +110,23 @@ def run(args: argparse.Namespace) -> int:
     unsafe = None
     try:
         findings = preflight.check_settings(bf, inst)
+        movers = [
+            f for f in findings if f.status == "MISMATCH" and f.instrument in ("generator", "stage")
+        ]
+        if test is not None and movers:  # nothing moves or fires on a bench that does not match
+            # (an output already on, a generator that did not answer, limits beyond the travel)
+            findings.append(
+                preflight.Finding(
+                    "burst",
+                    "one burst",
+                    "",
+                    "not fired, the stage not homed",
+                    "MISMATCH",
+                    "--move needs the generator and stage to match first: "
+                    + "; ".join(f"{f.instrument} {f.item}" for f in movers),
+                )
+            )
+            test = None
         if test is not None:
             leaving = True  # on another error or a stop signal, until the burst test is done
             try:

@@ -131,11 +131,17 @@ def test_check_move_names_a_safe_state_it_could_not_confirm_exit_3(
     """After the burst the outputs are read back and the stage asked whether it came to rest,
     as at a run's end; before, check --move called each safe state and said nothing of it."""
 
-    def stuck(bench: Any) -> None:
-        bench.stage.is_moving = lambda: True
-        bench.generator.output_state = lambda ch: True  # an output stuck on
+    import daq.preflight
 
-    _connected(monkeypatch, stuck)
+    burst = daq.preflight.check_burst
+
+    def then_stuck(bf: Any, inst: Any, test: Any) -> Any:  # the burst leaves them stuck
+        found = burst(bf, inst, test)
+        inst.stage.is_moving = lambda: True
+        inst.generator.output_state = lambda ch: True  # an output stuck on
+        return found
+
+    monkeypatch.setattr(daq.preflight, "check_burst", then_stuck)
     assert main(["check", "--move", "--cylinder", "2"]) == 3
     cap = capsys.readouterr()
     assert "MISMATCH bench safe state after the burst" in cap.out
@@ -260,3 +266,21 @@ def test_check_shows_the_errors_the_generator_held_when_it_connected(
     assert main(["check"]) == 1
     out = capsys.readouterr().out
     assert re.search(r"MISMATCH generator error queue: -222,\"?Data out of range", out), out
+
+
+def test_check_move_does_not_move_or_fire_on_a_generator_that_does_not_match(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A second reader: --move homed the stage and fired a burst whatever the read-only check
+    found (here an output already on)."""
+
+    def pressed(bench: Any) -> None:
+        bench.world._inst.generator.channels[2].output_on = True
+
+    made = _connected(monkeypatch, pressed)
+    assert main(["check", "--move", "--cylinder", "2"]) == 1
+    out = capsys.readouterr().out
+    assert re.search(r"^MISMATCH\s+burst\s+one burst.*not fired", out, re.M), out
+    assert "generator output 2 (rtl)" in out
+    world = made[0].world
+    assert not world._inst.stage.homed and world.n_acquisitions == 0
