@@ -390,6 +390,11 @@ class MainWindow(QMainWindow):
 
     def _connected(self, bf: Any, result: Any, err: BaseException | None) -> None:
         self._busy_connect = False
+        if err is None and bf is not self.bench_file:  # connected to a bench file changed
+            # since: closed (its ports and instrument locks were kept until the window closed,
+            # and a run_protocol was refused "in use by" this window; a second reader)
+            dropped = result[0]
+            BackgroundCall(dropped.close, lambda r, e: None, name="biafc-gui-close-dropped")
         if err is not None or bf is not self.bench_file:
             msg = f"connect failed: {err}" if err is not None else "bench changed"
             self.bench_panel.status_label.setText(f"✗ {msg}")

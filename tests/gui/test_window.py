@@ -749,3 +749,21 @@ def test_a_stop_signal_keeps_an_unsafe_status_and_gives_its_own_otherwise(
         win.exit_status = before  # the last run's (3 unsafe, 4 points failed)
         win.stop_signal(signal.SIGTERM)
         assert win.exit_status == after, (before, win.exit_status)
+
+
+def test_a_bench_connected_after_the_bench_file_changed_is_closed(
+    qtbot: Any, window: MainWindow
+) -> None:
+    """A second reader: the window dropped such a bench without closing it, and kept its ports
+    and instrument locks until it closed (a run_protocol was refused "in use by" it)."""
+
+    class Dropped:
+        closed = False
+
+        def close(self) -> None:
+            Dropped.closed = True
+
+    stale = object()  # a bench file that is no longer the window's
+    window._connected(stale, (Dropped(), {}), None)
+    qtbot.waitUntil(lambda: Dropped.closed, timeout=5_000)
+    assert window.instruments is None
