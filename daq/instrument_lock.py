@@ -28,7 +28,7 @@ from typing import Any
 
 from daq.store.lock import FileInUse, LockNotWritable, RunFileLock, command_shown
 
-__all__ = ["InstrumentInUse", "InstrumentLocks", "lock_instruments"]
+__all__ = ["InstrumentInUse", "InstrumentLocks", "canonical", "lock_instruments"]
 
 #: this process's held locks: lock path -> the lock and the connections that hold it
 _HELD: dict[Path, tuple[RunFileLock, int]] = {}
@@ -70,10 +70,29 @@ def _folder() -> Path:
     return cache_dir() / "instruments"
 
 
+def canonical(address: str) -> str:
+    """One spelling per device, so that two bench files naming one port or card differently
+    take one lock (a second reader: ``COM3`` and ``ASRL3::INSTR``, ``/dev/ttyUSB0`` and
+    ``ASRL/dev/ttyUSB0::INSTR``, ``Dev1`` and ``dev1`` took two): a VISA serial resource is
+    its port (``ASRLn`` is ``COMn``), a VISA resource is upper-cased (VISA names are not case
+    sensitive), a serial device path is kept, and anything else (an NI device name) is
+    upper-cased."""
+    a = address.strip()
+    m = re.fullmatch(r"ASRL(.+?)(::INSTR)?", a, flags=re.IGNORECASE)
+    if m is not None:
+        port = m.group(1)
+        a = f"COM{port}" if port.isdigit() else port
+    if a.startswith("/"):
+        return a  # a device path: case matters
+    return a.upper()
+
+
 def _name(address: str) -> str:
-    """A file name for an instrument address (readable, and unique by its hash)."""
-    slug = re.sub(r"[^A-Za-z0-9]+", "_", address).strip("_")[:48] or "instrument"
-    return f"{slug}-{hashlib.sha256(address.encode()).hexdigest()[:12]}"
+    """A file name for an instrument address (readable, and unique by its hash of the
+    :func:`canonical` address)."""
+    key = canonical(address)
+    slug = re.sub(r"[^A-Za-z0-9]+", "_", key).strip("_")[:48] or "instrument"
+    return f"{slug}-{hashlib.sha256(key.encode()).hexdigest()[:12]}"
 
 
 class InstrumentLocks:

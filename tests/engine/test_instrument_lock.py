@@ -155,3 +155,30 @@ def test_a_failed_connection_lets_its_locks_go(
     with pytest.raises(ConnectError, match="does not answer"):
         connect_bench(LAB)
     assert _locks(tmp_path) == []
+
+
+def test_one_device_named_two_ways_is_one_lock(
+    cables: list[tuple[str, str, float]], tmp_path: Path
+) -> None:
+    """A second reader: the locks went by the address text, so ``ASRL3::INSTR`` beside
+    ``COM3`` (or ``Dev1`` beside ``dev1``) let two processes drive one port or card."""
+    from daq.instrument_lock import canonical
+
+    assert canonical("ASRL3::INSTR") == canonical("COM3") == canonical("asrl3")
+    assert canonical("ASRL/dev/ttyUSB0::INSTR") == canonical("/dev/ttyUSB0")
+    assert canonical("Dev1") == canonical("dev1") and canonical("/dev/ttyUSB0") != "/DEV/TTYUSB0"
+    holder = _holder(tmp_path)
+    try:
+        text = (
+            LAB.read_text()
+            .replace("TCPIP0::192.168.1.10::INSTR", "TCPIP0::192.168.1.11::INSTR")
+            .replace("resource: ASRL3::INSTR", "resource: ASRL7::INSTR")
+            .replace("resource: ASRL4::INSTR", "resource: COM4")  # the holder's stage
+        )
+        other = tmp_path / "other.yaml"
+        other.write_text(text)
+        with pytest.raises(ConnectError, match="stage COM4 is in use by process"):
+            connect_bench(other)
+    finally:
+        holder.kill()
+        holder.wait(10)
