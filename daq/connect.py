@@ -246,7 +246,13 @@ def _connect_hardware(b: BenchSpec, chain: Any, locks: Any) -> BenchInstruments:
         "stage": (b.stage.resource, b.stage.timeout, b.stage.baud_rate),
     }
     transports: dict[str, Any] = {}
+    digitiser: Any = None
     try:
+        # the NI driver and card first: a missing driver or a wrong device name is said before
+        # any instrument is opened or written to (they were found after all three had been)
+        digitiser = _import("daq.digitiser_nidaq", "NidaqDigitiser")(
+            b.daq.device, max_rate_Hz=b.daq.max_rate, terminal_config=b.daq.terminal_config
+        )
         for name, (resource, timeout_s, baud_rate) in links.items():
             transports[name] = open_transport(
                 resource,
@@ -256,13 +262,13 @@ def _connect_hardware(b: BenchSpec, chain: Any, locks: Any) -> BenchInstruments:
                 visa_backend=b.visa_backend,
             )
         generator, vibrometer, stage = build_drivers(b, transports)
-        digitiser = _import("daq.digitiser_nidaq", "NidaqDigitiser")(
-            b.daq.device, max_rate_Hz=b.daq.max_rate, terminal_config=b.daq.terminal_config
-        )
     except BaseException:  # every link opened so far is closed: a COM port held by a failed
         # connect refused the window's next Connect ("Access is denied"; a second reader)
         for transport in transports.values():
             with contextlib.suppress(Exception):
                 transport.close()
+        if digitiser is not None:
+            with contextlib.suppress(Exception):
+                digitiser.close()
         raise
     return BenchInstruments(generator, vibrometer, stage, digitiser, chain, "hardware", locks=locks)

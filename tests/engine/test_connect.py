@@ -3,6 +3,7 @@ bench and the lab bench go through the same driver construction, from the same f
 
 from __future__ import annotations
 
+import importlib
 from typing import Any
 
 import pytest
@@ -92,14 +93,32 @@ def test_a_failed_connect_closes_every_link_it_opened(monkeypatch: pytest.Monkey
         def close(self) -> None:
             closed.append(self.name)
 
-    monkeypatch.setitem(sys.modules, "daq.digitiser_nidaq", None)  # import fails
-    monkeypatch.setattr(
-        daq.connect, "build_drivers", lambda b, transports, clock=None: (None, None, None)
-    )
     monkeypatch.setattr(instruments.transport, "open_transport", Link)
+    nidaq = importlib.import_module("daq.digitiser_nidaq")
+    # the NI driver missing: said before any link is opened (it was found after all three)
+    monkeypatch.setitem(sys.modules, "daq.digitiser_nidaq", None)  # import fails
     with pytest.raises(daq.connect.ConnectError):
         connect_bench(ROOT / "lab_bench.yaml")
-    assert closed == ["generator", "vibrometer", "stage"]
+    assert closed == []
+    # a stage that fails at connect: every link opened is closed, the card's task too
+    monkeypatch.setitem(sys.modules, "daq.digitiser_nidaq", nidaq)
+
+    class Card:
+        def __init__(self, *a: Any, **k: Any) -> None:
+            pass
+
+        def close(self) -> None:
+            closed.append("digitiser")
+
+    monkeypatch.setattr(nidaq, "NidaqDigitiser", Card)
+
+    def stage_dead(b: Any, transports: Any, clock: Any = None) -> Any:
+        raise ConnectionError("stage: no reply")
+
+    monkeypatch.setattr(daq.connect, "build_drivers", stage_dead)
+    with pytest.raises(ConnectionError):
+        connect_bench(ROOT / "lab_bench.yaml")
+    assert closed == ["generator", "vibrometer", "stage", "digitiser"]
 
 
 def test_the_bench_files_level_full_scale_reaches_the_vibrometer(tmp_path) -> None:  # type: ignore[no-untyped-def]
