@@ -69,7 +69,7 @@ def print_findings(findings: list[Any], out: TextIO) -> None:
 def run(args: argparse.Namespace) -> int:
     from daq import preflight
     from daq.connect import BenchInUse, connect_bench
-    from instruments.errors import InstrumentError
+    from instruments.errors import DriverNotInstalledError, InstrumentError
     from instruments.units import UnitError
     from protocols.bench import default_bench_path, load_bench
     from protocols.schema import parse_amplitude
@@ -101,10 +101,12 @@ def run(args: argparse.Namespace) -> int:
     print(f"biafc check: {name} ({bf.bench.name!r}, {kind} bench)")
     try:
         inst = connect_bench(bf)
-    except BenchInUse as exc:  # refused: another process drives the bench, nothing was opened
-        print(f"biafc check: refused: {exc}", file=sys.stderr)
+    except (BenchInUse, ConfigError, DriverNotInstalledError) as exc:  # refused, as run_protocol
+        # refuses them (exit 2): another process drives the bench, the bench file, a driver not
+        # installed (it was exit 1 here); nothing was opened
+        print(f"biafc check: refused: {str(exc).splitlines()[0]}", file=sys.stderr)
         return 2
-    except (ConfigError, InstrumentError, OSError) as exc:
+    except (InstrumentError, OSError) as exc:
         print(f"biafc check: cannot connect: {str(exc).splitlines()[0]}", file=sys.stderr)
         return 1
     unsafe = None

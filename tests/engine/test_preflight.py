@@ -284,3 +284,26 @@ def test_check_move_does_not_move_or_fire_on_a_generator_that_does_not_match(
     assert "generator output 2 (rtl)" in out
     world = made[0].world
     assert not world._inst.stage.homed and world.n_acquisitions == 0
+
+
+def test_check_refuses_a_missing_driver_as_run_protocol_does(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    """A second reader: a missing NI-DAQmx driver was exit 2 from run_protocol and exit 1 from
+    biafc check, and it was found after the three instruments had been opened."""
+    import instruments.transport
+    from daq import digitiser_nidaq
+    from instruments.errors import DriverNotInstalledError
+
+    def missing() -> Any:
+        raise DriverNotInstalledError("NI-DAQmx driver not installed or not loadable")
+
+    opened: list[str] = []
+    monkeypatch.setenv("BIAFC_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setattr(digitiser_nidaq, "_load_nidaqmx", missing)
+    monkeypatch.setattr(instruments.transport, "open_transport", lambda r, **k: opened.append(r))
+    lab = Path(__file__).resolve().parents[2] / "protocols" / "benches" / "lab_bench.yaml"
+    assert main(["check", str(lab)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith("biafc check: refused: NI-DAQmx driver not installed"), err
+    assert opened == []
