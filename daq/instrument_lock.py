@@ -21,6 +21,7 @@ connections. A simulated bench is never locked: its instruments are its process'
 from __future__ import annotations
 
 import hashlib
+import os
 import re
 import threading
 from pathlib import Path
@@ -74,16 +75,27 @@ def canonical(address: str) -> str:
     """One spelling per device, so that two bench files naming one port or card differently
     take one lock (a second reader: ``COM3`` and ``ASRL3::INSTR``, ``/dev/ttyUSB0`` and
     ``ASRL/dev/ttyUSB0::INSTR``, ``Dev1`` and ``dev1`` took two): a VISA serial resource is
-    its port (``ASRLn`` is ``COMn``), a VISA resource is upper-cased (VISA names are not case
-    sensitive), a serial device path is kept, and anything else (an NI device name) is
-    upper-cased."""
+    its port (``ASRLn`` is ``COMn``), a LAN instrument its host (board number and protocol
+    left out), a USB one its vendor, product and serial (ids as numbers), a serial device path
+    its real path, and anything else (an NI device name) is upper-cased (VISA and NI names are
+    not case sensitive)."""
     a = address.strip()
     m = re.fullmatch(r"ASRL(.+?)(::INSTR)?", a, flags=re.IGNORECASE)
     if m is not None:
         port = m.group(1)
         a = f"COM{port}" if port.isdigit() else port
     if a.startswith("/"):
-        return a  # a device path: case matters
+        return os.path.realpath(a)  # a device path (a /dev/serial/by-id link is its tty)
+    tcp = re.fullmatch(r"TCPIP\d*::([^:]+)(::.*)?", a, flags=re.IGNORECASE)
+    if tcp is not None:  # one instrument whatever the protocol (INSTR, inst0, hislip, SOCKET)
+        return f"TCPIP::{tcp.group(1).upper()}"
+    usb = re.fullmatch(r"USB\d*::([^:]+)::([^:]+)::([^:]+)(::.*)?", a, flags=re.IGNORECASE)
+    if usb is not None:  # vendor and product as numbers (0x0957 is 2391), and the serial
+        try:
+            vendor, product = int(usb.group(1), 0), int(usb.group(2), 0)
+        except ValueError:
+            return a.upper()
+        return f"USB::{vendor}::{product}::{usb.group(3).upper()}"
     return a.upper()
 
 
@@ -121,8 +133,15 @@ def lock_instruments(addresses: dict[str, str]) -> InstrumentLocks:
     folder = _folder()
     with _GUARD:
         try:
+            roles: dict[Path, str] = {}
             for role, address in addresses.items():
                 path = folder / _name(address)
+                if path in roles:  # one bench file naming one device for two roles
+                    raise InstrumentInUse(
+                        f"the {roles[path]} and the {role} are one device ({address}): give each "
+                        "instrument its own address in the bench file"
+                    )
+                roles[path] = role
                 if path in _HELD:
                     lock, count = _HELD[path]
                 else:

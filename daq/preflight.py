@@ -96,8 +96,21 @@ def _generator(bf: BenchFile, gen: Any) -> list[Finding]:
         )
     )
     out.append(Finding("generator", "firmware", "", firmware, "info"))
-    # what the queue held when the bench connected (its connect clears it) and since
-    errors = [*getattr(gen, "errors_at_connect", []), *gen.errors()]
+    # what the queue held when the bench connected (said, not a mismatch: the connect cleared
+    # them, and a second check would pass), then what it holds now
+    before = list(getattr(gen, "errors_at_connect", []))
+    if before:
+        out.append(
+            Finding(
+                "generator",
+                "errors before connecting",
+                "",
+                "; ".join(before) + " (cleared at connect)",
+                "info",
+                "left by an earlier session",
+            )
+        )
+    errors = gen.errors()
     out.append(
         Finding(
             "generator",

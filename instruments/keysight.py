@@ -246,8 +246,8 @@ class KeysightGenerator:
     def connect(self) -> str:
         """Device clear (a reply that an earlier session left unread is dropped: ``*CLS``
         clears the error queue, not the output queue; skipped where the VISA session has none,
-        as pyvisa-py's USB and serial sessions), the errors left in the queue kept as
-        :attr:`errors_at_connect` (``biafc check`` shows them), ``*CLS``, ``*IDN?``; returns
+        as pyvisa-py's USB and serial sessions), ``*IDN?``, the errors left in the queue kept
+        as :attr:`errors_at_connect` (logged; ``biafc check`` shows them), ``*CLS``; returns
         the identity. An instrument that is not a 33500/33600 is refused
         (:class:`InstrumentError`): a run configured and switched on whatever answered."""
         clear = getattr(self.transport, "clear", None)
@@ -258,15 +258,18 @@ class KeysightGenerator:
                 raise
             except InstrumentError as exc:  # pyvisa-py has no device clear on USB or ASRL
                 log.info("%s: no device clear at connect (%s)", self.transport.name, exc)
-        self.errors_at_connect = self.errors()
-        self.transport.write("*CLS")
-        idn = self.identify()
+        idn = self.identify()  # first: a wrong instrument is named as such, not by a bad reply
         fields = [p.strip() for p in idn.split(",")]
         if not fields[1].upper().startswith(("335", "336")):
             raise InstrumentError(
                 f"{self.transport.name} answers as {fields[0]} {fields[1]}, not a Keysight "
                 "33500B/33600A: check generator.resource"
             )
+        self.errors_at_connect = self.errors()
+        if self.errors_at_connect:
+            log.info("%s: errors left from before, cleared: %s", self.transport.name,
+                     "; ".join(self.errors_at_connect))  # fmt: skip
+        self.transport.write("*CLS")
         return idn
 
     def identity(self) -> dict[str, Any]:

@@ -273,7 +273,7 @@ class DaqSpec(_Model):
             ("velocity_channel", self.velocity_channel),
             ("reference_channel", self.reference_channel),
         ):
-            if channel.strip().lower().partition("/")[0] != dev:
+            if channel.strip().lstrip("/").lower().partition("/")[0] != dev:
                 raise ValueError(f"{name}: {channel!r} is not on daq.device {self.device!r}")
         if self.velocity_channel.strip().lower() == self.reference_channel.strip().lower():
             raise ValueError(

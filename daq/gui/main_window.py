@@ -394,7 +394,12 @@ class MainWindow(QMainWindow):
             # since: closed (its ports and instrument locks were kept until the window closed,
             # and a run_protocol was refused "in use by" this window; a second reader)
             dropped = result[0]
-            BackgroundCall(dropped.close, lambda r, e: None, name="biafc-gui-close-dropped")
+            self._busy_connect = True  # no new Connect to the same ports before it is closed
+
+            def closed(r: Any, e: BaseException | None) -> None:
+                self._busy_connect = False
+
+            BackgroundCall(dropped.close, closed, name="biafc-gui-close-dropped")
         if err is not None or bf is not self.bench_file:
             msg = f"connect failed: {err}" if err is not None else "bench changed"
             self.bench_panel.status_label.setText(f"✗ {msg}")

@@ -99,13 +99,17 @@ class VisaTransport:
                 f"{self.name}: cannot open VISA resource ({_one_line(exc)}); "
                 + (_open_hint(resource, backend, str(exc)) or _CHECK)
             ) from None
-        self.timeout_s = float(timeout_s)
-        self._res.read_termination = read_termination
-        self._res.write_termination = write_termination
-        self._res.encoding = "latin-1"  # every byte a character: a reply with a micro sign
-        # reads (pyvisa's default, ASCII, raised UnicodeDecodeError on it); see reply_text
-        if baud_rate is not None:
-            self._res.baud_rate = int(baud_rate)
+        try:
+            self.timeout_s = float(timeout_s)
+            self._res.read_termination = read_termination
+            self._res.write_termination = write_termination
+            self._res.encoding = "latin-1"  # every byte a character: a reply with a micro sign
+            # reads (pyvisa's default, ASCII, raised UnicodeDecodeError on it); see reply_text
+            if baud_rate is not None:
+                self._res.baud_rate = int(baud_rate)
+        except BaseException:  # the session is not ours to hand back: closed, not leaked
+            self.close()
+            raise
         self._write_term = write_termination.encode()
         import pyvisa.constants as vc
 

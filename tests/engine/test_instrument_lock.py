@@ -182,3 +182,28 @@ def test_one_device_named_two_ways_is_one_lock(
     finally:
         holder.kill()
         holder.wait(10)
+
+
+def test_a_lan_or_usb_generator_is_one_lock_whatever_its_spelling(
+    cables: list[tuple[str, str, float]], tmp_path: Path
+) -> None:
+    """A reviewer: the LAN generator, where a lock matters most (a 33500B takes several LAN
+    sessions), took one lock per spelling of its address; one bench file naming one device
+    for two roles is refused."""
+    from daq.instrument_lock import InstrumentInUse, canonical, lock_instruments
+
+    lan = {
+        canonical(a)
+        for a in (
+            "TCPIP0::192.168.1.10::INSTR",
+            "TCPIP::192.168.1.10::INSTR",
+            "TCPIP0::192.168.1.10::inst0::INSTR",
+            "TCPIP0::192.168.1.10::hislip0::INSTR",
+            "TCPIP0::192.168.1.10::5025::SOCKET",
+        )
+    }
+    assert lan == {"TCPIP::192.168.1.10"}
+    assert canonical("USB0::0x0957::0x2C07::MY1::INSTR") == canonical("USB::2391::11271::my1")
+    with pytest.raises(InstrumentInUse, match="the vibrometer and the stage are one device"):
+        lock_instruments({"vibrometer": "ASRL3::INSTR", "stage": "COM3"})
+    assert _locks(tmp_path) == []  # nothing kept

@@ -757,13 +757,22 @@ def test_a_bench_connected_after_the_bench_file_changed_is_closed(
     """A second reader: the window dropped such a bench without closing it, and kept its ports
     and instrument locks until it closed (a run_protocol was refused "in use by" it)."""
 
+    import threading
+
+    go = threading.Event()
+
     class Dropped:
         closed = False
 
         def close(self) -> None:
+            go.wait(5)
             Dropped.closed = True
 
     stale = object()  # a bench file that is no longer the window's
     window._connected(stale, (Dropped(), {}), None)
+    # no new Connect to the same ports while it closes (a reviewer: the two overlapped)
+    assert window._busy_connect and not Dropped.closed
+    go.set()
     qtbot.waitUntil(lambda: Dropped.closed, timeout=5_000)
+    qtbot.waitUntil(lambda: not window._busy_connect, timeout=5_000)
     assert window.instruments is None

@@ -113,6 +113,25 @@ def test_connect_refuses_an_instrument_that_is_not_a_33500_or_33600(
         gen.connect()
 
 
+@pytest.mark.parametrize(
+    "idn",
+    [
+        "Keysight Technologies,33622A,MY12345678,A.02.03-3.15-03-64-02",
+        "Agilent Technologies,33522B,MY52800123,3.05-1.19-2.00-52-00",
+        "Agilent Technologies,33509B,MY1,2.03-1.19-2.00-52-00",
+        "Keysight Technologies,33500B,MY1,x",
+    ],
+)
+def test_connect_takes_every_33500_and_33600_as_they_answer(
+    idn: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import sim_backend.emulators.keysight as emulated
+
+    monkeypatch.setattr(emulated, "IDN", idn)
+    gen, _ = on_emulator()
+    assert gen.connect() == idn
+
+
 def test_connect_clears_a_stale_error_queue() -> None:
     gen, emu = on_emulator()
     emu.push_error(-350, "Queue overflow")  # left over from the last session
