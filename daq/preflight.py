@@ -20,6 +20,7 @@ from numpy.typing import NDArray
 
 from daq.engine.instruments import BenchInstruments
 from instruments.errors import ReplyError
+from instruments.keysight import supported_model
 from instruments.polytec import LevelAboveFullScale
 from protocols.bench import BenchFile
 
@@ -82,7 +83,7 @@ def _generator(bf: BenchFile, gen: Any) -> list[Finding]:
     out: list[Finding] = []
     idn = [p.strip() for p in gen.identify().split(",")]
     maker, model, serial, firmware = (idn + ["?"] * 4)[:4]
-    ok_model = model.upper().startswith(("335", "336"))
+    ok_model = supported_model(model)  # the driver's own rule (its connect refuses the others)
     out.append(
         Finding(
             "generator",

@@ -55,6 +55,7 @@ __all__ = [
     "KeysightGenerator",
     "arb_peak_factor",
     "dac_codes",
+    "supported_model",
     "unequal_peaks",
 ]
 
@@ -186,6 +187,12 @@ def dac_codes(samples: NDArray[np.float64]) -> NDArray[np.int16]:
     return np.rint(np.clip(x, -1.0, 1.0) * DAC_FULL_SCALE).astype(np.int16)
 
 
+def supported_model(model: str) -> bool:
+    """Whether ``model`` (the second field of ``*IDN?``, e.g. ``"33522B"``) is one this driver
+    speaks to: the 33500B and 33600A series."""
+    return model.strip().upper().startswith(("335", "336"))
+
+
 class KeysightGenerator:
     """Keysight 33500B / 33600A on a :class:`Transport` (implements ``FunctionGenerator``).
 
@@ -260,7 +267,7 @@ class KeysightGenerator:
                 log.info("%s: no device clear at connect (%s)", self.transport.name, exc)
         idn = self.identify()  # first: a wrong instrument is named as such, not by a bad reply
         fields = [p.strip() for p in idn.split(",")]
-        if not fields[1].upper().startswith(("335", "336")):
+        if not supported_model(fields[1]):
             raise InstrumentError(
                 f"{self.transport.name} answers as {fields[0]} {fields[1]}, not a Keysight "
                 "33500B/33600A: check generator.resource"
