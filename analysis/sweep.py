@@ -39,7 +39,7 @@ from analysis.bands import (
 )
 from analysis.noise_floor import RESOLVED_FACTOR, noise_energy, resolved
 from analysis.spectra import amplitude_spectrum, peak_frequency
-from analysis.transmission import signal_energy
+from analysis.transmission import energy_transmission, signal_energy
 from protocols.runfile import ChainInfo, ScanData
 
 __all__ = [
@@ -104,17 +104,11 @@ def input_frequency_Hz(scan: ScanData) -> NDArray[np.float64]:
     f_c = scan.f_center_Hz
     out = np.full(len(scan.amplitudes), f_c, dtype=np.float64)
     for a in range(len(scan.amplitudes)):
-        rows = [
-            scan.drive[a, c]
-            for c in range(len(scan.cylinders))
-            if scan.done[a, c] == 1
-            and np.all(np.isfinite(scan.drive[a, c]))
-            and np.any(scan.drive[a, c] != 0)
-        ]
-        if not rows:
+        d = scan.drive[a]  # [C, S]
+        usable = (scan.done[a] == 1) & np.all(np.isfinite(d), axis=-1) & np.any(d != 0, axis=-1)
+        if not usable.any():
             continue
-        peaks = peak_frequency(amplitude_spectrum(np.asarray(rows), rate), 0.3 * f_c, 3.0 * f_c)
-        peaks = np.asarray(peaks, dtype=np.float64)
+        peaks = peak_frequency(amplitude_spectrum(d[usable], rate), 0.3 * f_c, 3.0 * f_c)
         if np.any(np.isfinite(peaks)):
             out[a] = float(np.nanmedian(peaks))
     return out
@@ -140,11 +134,11 @@ def amplitude_sweep(scan: ScanData, chain: ChainInfo) -> AmplitudeSweep:
     v_entry = scan.velocity[:, i_entry, :].astype(np.float64) if i_entry is not None else nan_rec
     spec = amplitude_spectrum(v_far, rate).band(*f_range)
     in_hz = input_frequency_Hz(scan)
-    e_far = signal_energy(v_far, rate)
+    transmission = energy_transmission(v_entry, v_far, rate)
+    e_far = signal_energy(v_far, rate)  # for the noise floor and its bound
     e_entry = signal_energy(v_entry, rate)
     far_measured = np.all(np.isfinite(v_far), axis=-1)
     with np.errstate(divide="ignore", invalid="ignore"):
-        transmission = np.where(e_entry > 0, e_far / e_entry, np.nan)
         noise = noise_energy(v_far, scan.time_s, rate)
         noise_ratio = np.where(noise > 0, e_far / noise, np.where(noise == 0, np.inf, np.nan))
         # the far record alone decides (its entry point may have failed)
