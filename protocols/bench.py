@@ -265,9 +265,9 @@ class DaqSpec(_Model):
     @model_validator(mode="after")
     def _channels_on_the_device(self) -> DaqSpec:
         """Both inputs on ``device`` (whose rate ceiling and lock they use) and apart: on the NI
-        path a typo
-        (``Dev2/ai0`` beside ``device: Dev1``) failed only at the first record, its error
-        naming the field that was right (a second reader; the simulated digitiser refused it)."""
+        path a typo (``Dev2/ai0`` beside ``device: Dev1``) failed only at the first record, its
+        error naming the field that was right (a second reader; the simulated digitiser refused
+        it)."""
         dev = self.device.strip().lower()
         for name, channel in (
             ("velocity_channel", self.velocity_channel),
