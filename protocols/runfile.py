@@ -927,9 +927,12 @@ def _damaged(path: Path, exc: BaseException) -> str:
 
 
 def _read_records(path: Path, direction: str, g: h5py.Group, name: str) -> np.ndarray:
-    """The records ``name`` ([A, C, S]) of scan ``g``. A point whose chunk fails its Fletcher-32
-    checksum (bytes damaged on disk; files written since 2026-11-27 carry one a point) is
-    refused in one line naming the file and the points, found by reading them one by one."""
+    """The records ``name`` ([A, C, S]) of scan ``g``. A measured point whose chunk fails its
+    Fletcher-32 checksum (bytes damaged on disk; files written since 2026-11-27 carry one a
+    point) is refused in one line naming the file and the points, found by reading them one by
+    one. A point not measured (pending or failed) holds no measurement: its damaged chunk (a
+    write a full disk cut short) reads as not measured, NaN; it refused the whole file, even to
+    biafc repair, which had cleared the flags that hid it."""
     ds = g[name]
     try:
         return np.asarray(ds[...])
@@ -937,14 +940,21 @@ def _read_records(path: Path, direction: str, g: h5py.Group, name: str) -> np.nd
         if not ds.fletcher32:
             raise  # no checksums in this file: its damage (one_line_errors)
         error = exc
+    damaged = bad_points(ds)
+    if not damaged:
+        raise error  # every point reads alone: some other damage (one_line_errors)
+    done = g["done"][...]
+    measured = [(a, c) for a, c in damaged if done[a, c] == PointState.DONE]
+    if not measured:
+        out = np.full(ds.shape, np.nan, dtype=ds.dtype)
+        for a in range(ds.shape[0]):
+            for c in range(ds.shape[1]):
+                if (a, c) not in damaged:
+                    out[a, c] = ds[a, c]
+        return out
     amps, cyls = g["amplitudes"][...], g["cylinders"][...]
     units = str(g["amplitudes"].attrs.get("units", ""))
-    bad = [
-        f"amplitude #{a + 1} ({amps[a]:g} {units}) cylinder {int(cyls[c])}"
-        for a, c in bad_points(ds)
-    ]
-    if not bad:
-        raise error  # every point reads alone: some other damage (one_line_errors)
+    bad = [f"amplitude #{a + 1} ({amps[a]:g} {units}) cylinder {int(cyls[c])}" for a, c in measured]
     listed = "; ".join(bad[:4]) + (f"; and {len(bad) - 4} more" if len(bad) > 4 else "")
     raise DamagedRecordsError(
         f"{path}: {name} records of {len(bad)} {direction} point(s) fail their checksum "

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from daq.cli.biafc import main as biafc
-from protocols.runfile import RunFileError, RunFileWriter, ScanSpec, read_run
+from protocols.runfile import PointState, RunFileError, RunFileWriter, ScanSpec, read_run
 
 from .helpers import chain_info, flip_bytes
 
@@ -173,3 +173,21 @@ def test_repair_then_resume_measures_the_damaged_point_again(tmp_path: Path) -> 
     for d in ("ltr", "rtl"):
         assert np.array_equal(a.scans[d].done, b.scans[d].done)
         assert np.array_equal(a.scans[d].velocity, b.scans[d].velocity)
+
+
+def test_a_damaged_chunk_of_a_point_not_measured_reads_as_not_measured(run_file: Path) -> None:
+    """A full disk cut a point's records short before it was marked done: that chunk failed its
+    checksum, and the whole file was refused, even to biafc repair once it had cleared the
+    killed writer's flags (CI, about 1 run in 25 of the full-disk test). Nothing was measured
+    there, so it reads as not measured; a measured point's damage is still refused."""
+    from daq.store.repair import repair_run
+
+    good = read_run(run_file).scans["ltr"]
+    with h5py.File(run_file, "r+") as f:
+        f["scan/ltr/done"][1, 2] = PointState.PENDING
+    _damage(run_file, "velocity", 1, 2)
+    scan = read_run(run_file).scans["ltr"]
+    assert np.all(np.isnan(scan.velocity[1, 2])) and scan.done[1, 2] == PointState.PENDING
+    assert np.array_equal(scan.velocity[0], good.velocity[0])
+    assert np.array_equal(scan.velocity[1, :2], good.velocity[1, :2])
+    assert repair_run(run_file).n_done == 5  # the five measured points, kept
