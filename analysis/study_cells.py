@@ -46,6 +46,7 @@ from analysis.bands import asymmetry_factor, expected_output_Hz, peak_search_ran
 from analysis.spectra import amplitude_spectrum, peak_frequency
 from protocols.study import PARAMETERS, CellTable, Study
 from protocols.studyfile import STATUS_FAILED, STATUS_INACCURATE, STATUS_OK
+from sim_backend.dem.versions import model_version
 
 __all__ = [
     "NO_ESTIMATE",
@@ -84,7 +85,9 @@ class TaskResult:
     """The cells of one task: ``cells [k]`` (cell numbers), ``metrics`` name -> [k] float64
     (:func:`stored_names`), ``status [k]`` (:data:`STATUS_OK` ...), ``messages`` (cell ->
     why it failed), ``spectra`` direction -> [k, F] float32 far-end |V| (m) on
-    :func:`spectrum_grid_Hz` when the study records them; ``wall_s``, ``worker``."""
+    :func:`spectrum_grid_Hz` when the study records them; ``wall_s``, ``worker``;
+    ``model_version``: :func:`sim_backend.dem.versions.model_version` where the task ran (a
+    cluster's workers may run another installation than the client's)."""
 
     cells: NDArray[np.int64]
     metrics: dict[str, NDArray[np.float64]]
@@ -93,6 +96,7 @@ class TaskResult:
     spectra: dict[str, NDArray[np.float32]] = field(default_factory=dict)
     wall_s: float = 0.0
     worker: str = ""
+    model_version: str = ""
 
 
 def stored_names(study: Study) -> list[str]:
@@ -456,4 +460,5 @@ def run_task(
         spectra=spectra,
         wall_s=time.perf_counter() - t0,
         worker=f"{socket.gethostname()}:{os.getpid()}",
+        model_version=model_version(),
     )

@@ -67,6 +67,7 @@ def _one(folder: Path, name: str, client: Any | None) -> dict[str, Any]:
     from daq.study_runner import run_study
     from protocols.studyfile import StudyStore, read_study
     from sim_backend.dem.spec import default_chain_spec
+    from sim_backend.dem.versions import model_version
 
     sf, table, setup = _setup()
     base = default_chain_spec()
@@ -75,7 +76,7 @@ def _one(folder: Path, name: str, client: Any | None) -> dict[str, Any]:
     store = StudyStore.create(
         out, name="bench", study_yaml=STUDY, digest=sf.digest(base.to_yaml()),
         chain_yaml=base.to_yaml(), table=table, directions=sf.study.drive.directions,
-        metric_names=stored_names(sf.study), n_tasks=n_tasks,
+        metric_names=stored_names(sf.study), n_tasks=n_tasks, model_version=model_version(),
     )  # fmt: skip
     t0 = time.perf_counter()
     summary = run_study(setup, table, store, client=client)

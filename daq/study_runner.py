@@ -64,6 +64,10 @@ def _numba_threads_env(n_workers: int) -> dict[str, str]:
     }
 
 
+class MixedModel(RuntimeError):
+    """A task came back from a worker that runs another model version than the output's."""
+
+
 class SchedulerUnreachable(Exception):
     """No Dask scheduler answers at the address given (one line: the address, why, what to
     check)."""
@@ -248,6 +252,12 @@ def run_study(
 
     def finish(i: int, res: TaskResult) -> None:
         nonlocal n_done, task_s
+        ours = store.model_version
+        if ours and res.model_version != ours:  # a cluster's worker on another installation
+            raise MixedModel(
+                f"worker {res.worker} runs another model ({res.model_version or 'unknown'}) "
+                f"than this output's cells ({ours}); its task was not written"
+            )
         room_for_a_task(store.path, n_done)
         store.write_task(i, res)
         n_done += int(res.cells.size)

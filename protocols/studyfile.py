@@ -5,7 +5,8 @@ Layout (``format = "biafc-study"``, ``format_version = 1`` on the root)::
     /                     attrs: name, study_yaml (the study file's text), study_digest (sha256
                           of what decides the results, with the base chain), chain_yaml,
                           n_cells, amplitude_kind, directions, status (running | complete |
-                          incomplete | failed), created_utc, software
+                          incomplete | failed), created_utc, software, model_version (the DEM
+                          kernel's and the modes' versions that ran the cells)
     /parameters/<name>    [n_cells] float64, SI (attr unit); amplitude last
     /cells/point          [n_cells] int64: the design point of each cell
     /cells/status         [n_cells] int8: 0 not run, 1 ok, 2 inaccurate (above max_error),
@@ -142,7 +143,10 @@ class StudyStore:
         n_tasks: int,
         spectrum_freq_Hz: NDArray[np.float64] | None = None,
         cells_per_task: int | None = None,
+        model_version: str,
     ) -> StudyStore:
+        """Make a new output (``model_version``: :func:`sim_backend.dem.versions.model_version`
+        of the software that runs its cells; a continue with another is refused)."""
         p = Path(path)
         p.parent.mkdir(parents=True, exist_ok=True)
         tmp = p.with_name(f".{p.name}.{os.getpid()}.part")
@@ -163,6 +167,7 @@ class StudyStore:
                     "status": "running",
                     "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
                     "software": _software(),
+                    "model_version": model_version,
                 }
             )
             n = table.n_cells
@@ -215,9 +220,12 @@ class StudyStore:
         table: CellTable,
         n_tasks: int | None = None,
         cells_per_task: int | None = None,
+        model_version: str | None = None,
     ) -> StudyStore:
         """Open an output to continue it; refused (:class:`StudyFileError`) when it is not a
-        study output, was made from another study (digest) or holds other cells. The caller holds
+        study output, was made from another study (digest), holds other cells or (when
+        ``model_version`` is given) was run by another model version, or by a version of this
+        software that did not record it: its cells would mix with this run's. The caller holds
         the file's lock; the open-for-write flags a killed writer left are cleared first.
         ``n_tasks``, ``cells_per_task``: this run's grouping; when the output's ``/tasks`` counts
         in another (``run.cells_per_task`` edited between runs: the digest leaves ``run``
@@ -240,6 +248,8 @@ class StudyStore:
                     f"{p}: made from another study (digest {old[:12]}, this one {digest[:12]}); "
                     "choose another --out"
                 )
+            if model_version is not None:
+                _same_model(p, f, model_version)
             same = int(f.attrs["n_cells"]) == table.n_cells and all(
                 name in f["parameters"]
                 and np.array_equal(f["parameters"][name][...], table.values[:, i])
@@ -261,6 +271,11 @@ class StudyStore:
         except (ValueError, RuntimeError, OSError):
             pass  # an output made before SWMR: written as it is
         return cls(p, f)
+
+    @property
+    def model_version(self) -> str:
+        """The model version that ran this output's cells ("" where none was given)."""
+        return str(self.f.attrs.get("model_version", ""))
 
     def done(self) -> NDArray[np.bool_]:
         """``[n_cells]``: cells already run (ok, inaccurate or failed)."""
@@ -346,6 +361,21 @@ def _regroup_tasks(f: h5py.File, n_tasks: int, cells_per_task: int | None) -> No
     earlier = f.require_group("tasks_earlier")
     f.move("tasks", f"tasks_earlier/{len(earlier)}")
     _create_tasks(f, n_tasks, cells_per_task)
+
+
+def _same_model(p: Path, f: h5py.File, model_version: str) -> None:
+    """Refuse to continue an output whose cells another model version ran."""
+    old = f.attrs.get("model_version")
+    if not old:
+        raise StudyFileError(
+            f"{p}: made before studies recorded their model version, so its cells may come "
+            f"from another DEM kernel than this one ({model_version}); choose another --out"
+        )
+    if str(old) != model_version:
+        raise StudyFileError(
+            f"{p}: its cells were run by another model ({old}); this software runs "
+            f"{model_version}, and the two would mix; choose another --out"
+        )
 
 
 def _software() -> str:

@@ -120,6 +120,7 @@ def _run_to(
     from analysis.study_cells import spectrum_grid_Hz, stored_names
     from daq.store.lock import FileInUse, RunFileLock
     from protocols.studyfile import StudyFileError, StudyStore
+    from sim_backend.dem.versions import model_version
 
     lock = RunFileLock(out)
     try:
@@ -131,7 +132,7 @@ def _run_to(
             if out.exists():
                 store = StudyStore.open(
                     out, digest=digest, table=table, n_tasks=len(tasks),
-                    cells_per_task=study.run.cells_per_task,
+                    cells_per_task=study.run.cells_per_task, model_version=model_version(),
                 )  # fmt: skip
             else:
                 grid = spectrum_grid_Hz(study) if study.record_spectra else None
@@ -140,7 +141,7 @@ def _run_to(
                     chain_yaml=chain_yaml, table=table,
                     directions=study.drive.directions, metric_names=stored_names(study),
                     n_tasks=len(tasks), spectrum_freq_Hz=grid,
-                    cells_per_task=study.run.cells_per_task,
+                    cells_per_task=study.run.cells_per_task, model_version=model_version(),
                 )  # fmt: skip
         except StudyFileError as exc:
             raise CliError(str(exc)) from None

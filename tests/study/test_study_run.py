@@ -23,6 +23,7 @@ from daq.study_runner import dask_client, run_study
 from protocols.study import cell_table, load_study
 from protocols.studyfile import StudyStore, read_study
 from sim_backend.dem.spec import default_chain_spec
+from sim_backend.dem.versions import model_version
 
 
 def _setup(path: Path) -> tuple[Any, Any, Any, str]:
@@ -40,7 +41,7 @@ def _store(path: Path, out: Path) -> tuple[Any, Any, Any]:
         out, name=sf.study.name, study_yaml=sf.text, digest=digest,
         chain_yaml=default_chain_spec().to_yaml(), table=table,
         directions=sf.study.drive.directions, metric_names=stored_names(sf.study),
-        n_tasks=n_tasks,
+        n_tasks=n_tasks, model_version=model_version(),
     )  # fmt: skip
     return setup, table, store
 
