@@ -180,3 +180,16 @@ def test_a_stages_reply_is_waited_for_seconds_not_a_minute() -> None:
     move's own bound comes from its distance and speed."""
     spec = load_bench(ROOT / "lab_bench.yaml").bench
     assert spec.stage.timeout == 2.0 == spec.vibrometer.timeout
+
+
+def test_a_stage_timeout_set_in_the_bench_file_is_the_wait_for_its_replies(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Not only the default: a bench file's own ``stage.timeout`` reaches the stage's link."""
+    path = ROOT / "lab_bench.yaml"
+    text = path.read_text().replace("  settle: 0.2 s\n", "  settle: 0.2 s\n  timeout: 0.7 s\n")
+    bench = parse_bench(text, str(path))
+    assert bench.bench.stage.timeout == pytest.approx(0.7)
+    cables = cable_lab_bench(monkeypatch)
+    connect_bench(bench).close()
+    assert {name: timeout for name, _, timeout in cables}["stage"] == pytest.approx(0.7)
