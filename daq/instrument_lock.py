@@ -21,8 +21,10 @@ connections. A simulated bench is never locked: its instruments are its process'
 from __future__ import annotations
 
 import hashlib
+import ipaddress
 import os
 import re
+import socket
 import threading
 from pathlib import Path
 from typing import Any
@@ -75,9 +77,10 @@ def canonical(address: str) -> str:
     """One spelling per device, so that two bench files naming one port or card differently
     take one lock (a second reader: ``COM3`` and ``ASRL3::INSTR``, ``/dev/ttyUSB0`` and
     ``ASRL/dev/ttyUSB0::INSTR``, ``Dev1`` and ``dev1`` took two): a VISA serial resource is
-    its port (``ASRLn`` is ``COMn``), a LAN instrument its host (board number and protocol
-    left out), a USB one its vendor, product and serial (ids as numbers), a serial device path
-    its real path, and anything else (an NI device name) is upper-cased (VISA and NI names are
+    its port (``ASRLn`` is ``COMn``), a LAN instrument its host's address (board number and
+    protocol left out; a host name resolved as the connect will resolve it), a USB one its
+    vendor, product and serial (ids as numbers), a serial device path its real path, and
+    anything else (an NI device name) is upper-cased (VISA and NI names are
     not case sensitive)."""
     a = address.strip()
     m = re.fullmatch(r"ASRL(.+?)(::INSTR)?", a, flags=re.IGNORECASE)
@@ -88,7 +91,7 @@ def canonical(address: str) -> str:
         return os.path.realpath(a)  # a device path (a /dev/serial/by-id link is its tty)
     tcp = re.fullmatch(r"TCPIP\d*::([^:]+)(::.*)?", a, flags=re.IGNORECASE)
     if tcp is not None:  # one instrument whatever the protocol (INSTR, inst0, hislip, SOCKET)
-        return f"TCPIP::{tcp.group(1).upper()}"
+        return f"TCPIP::{_host_address(tcp.group(1))}"
     usb = re.fullmatch(r"USB\d*::([^:]+)::([^:]+)::([^:]+)(::.*)?", a, flags=re.IGNORECASE)
     if usb is not None:  # vendor and product as numbers (0x0957 is 2391), and the serial
         try:
@@ -97,6 +100,22 @@ def canonical(address: str) -> str:
             return a.upper()
         return f"USB::{vendor}::{product}::{usb.group(3).upper()}"
     return a.upper()
+
+
+def _host_address(host: str) -> str:
+    """A LAN instrument's IPv4 address (the lowest, where a name has several), so that its
+    name and its address are one lock; the name upper-cased where it does not resolve (the
+    connect then fails on it anyway). A written address is taken as it is."""
+    try:
+        return str(ipaddress.ip_address(host))
+    except ValueError:
+        pass
+    try:
+        found = socket.getaddrinfo(host, None, family=socket.AF_INET, type=socket.SOCK_STREAM)
+    except (OSError, UnicodeError):
+        return host.upper()
+    addresses = sorted({str(info[4][0]) for info in found}, key=ipaddress.ip_address)
+    return addresses[0] if addresses else host.upper()
 
 
 def _name(address: str) -> str:

@@ -203,6 +203,9 @@ def test_a_lan_or_usb_generator_is_one_lock_whatever_its_spelling(
         )
     }
     assert lan == {"TCPIP::192.168.1.10"}
+    # a host name and its address are one instrument (a reviewer at stop 39: two locks)
+    assert canonical("TCPIP0::localhost::INSTR") == canonical("TCPIP::127.0.0.1::inst0::INSTR")
+    assert canonical("TCPIP0::no-such-host.invalid::INSTR") == "TCPIP::NO-SUCH-HOST.INVALID"
     assert canonical("USB0::0x0957::0x2C07::MY1::INSTR") == canonical("USB::2391::11271::my1")
     with pytest.raises(InstrumentInUse, match="the vibrometer and the stage are one device"):
         lock_instruments({"vibrometer": "ASRL3::INSTR", "stage": "COM3"})
