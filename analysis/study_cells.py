@@ -57,6 +57,7 @@ __all__ = [
     "TaskResult",
     "cell_chain_spec",
     "check_cells",
+    "check_transit",
     "run_task",
     "spectrum_grid_Hz",
     "stored_names",
@@ -191,6 +192,55 @@ def check_cells(setup: StudySetup, table: CellTable) -> tuple[str, str] | None:
             values = ", ".join(f"{n} = {_fmt(n, v)}" for n, v in params.items())
             return where, f"no chain for {values}: {msg}"
     return None
+
+
+def check_transit(setup: StudySetup, table: CellTable) -> tuple[str, str] | None:
+    """``None``, or ``("simulation.duration", message)`` naming the cell that needs the longest
+    window, where some cell's window cannot hold its burst and the burst's transit to the far
+    end: at least ``n - 1`` crossings of ``sqrt(m0 / K)`` (the lightest cylinder's rigid mass
+    over the linearised contact stiffness; no wave crosses a contact faster), as
+    ``run_protocol`` checks a record. Such a
+    cell's far end holds nothing yet, and its metrics would read as a wave that did not pass.
+    ``alpha``'s tilt is left out (it moves the lengths a little, not the bound's order)."""
+    from instruments.units import format_quantity
+    from sim_backend.dem.chain import build_chain
+
+    study = setup.study
+    window = study.simulation.duration
+    chain_cols = [i for i, n in enumerate(table.names) if n in _CHAIN_PARAMS and n != "alpha"]
+    crossing: dict[tuple[float, ...], tuple[float, int]] = {}
+    worst: tuple[float, str] | None = None  # the cell that needs the longest window
+    for c in range(table.n_cells):
+        row = {n: float(table.values[c, j]) for j, n in enumerate(table.names)}
+        key = tuple(float(table.values[c, j]) for j in chain_cols)
+        if key not in crossing:
+            params = {table.names[j]: v for j, v in zip(chain_cols, key, strict=True)}
+            chain = build_chain(cell_chain_spec(setup.base_chain_json, params))
+            per = math.sqrt(float(np.min(chain.m0_kg)) / chain.K_lin) if chain.K_lin > 0 else 0.0
+            crossing[key] = (per * (chain.n - 1), chain.n)
+        transit, n = crossing[key]
+        for d in study.drive.directions:
+            f_in = row.get(f"carrier_{d}", study.drive.carrier(d))
+            burst_s = _burst(study, f_in, row).duration_s
+            need = burst_s + transit
+            if window >= need * (1 - 1e-9) or (worst is not None and need <= worst[0]):
+                continue
+            values = ", ".join(
+                f"{name} = {_fmt(name, row[name])}"
+                for name in table.names
+                if name in _CHAIN_PARAMS or name in ("cycles", f"carrier_{d}")
+            )
+            at = f" at {values}" if values else ""
+            worst = (
+                need,
+                (
+                    f"{format_quantity(window, 'time')} cannot hold the {d} burst "
+                    f"({format_quantity(burst_s, 'time')}) and its transit to the far end{at} (at "
+                    f"least {format_quantity(transit, 'time')} over {n - 1} contacts); give at least "
+                    f"{format_quantity(need, 'time')}"
+                ),
+            )
+    return None if worst is None else ("simulation.duration", worst[1])
 
 
 def spectrum_grid_Hz(study: Study) -> NDArray[np.float64]:

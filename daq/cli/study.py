@@ -51,6 +51,7 @@ def run(args: argparse.Namespace) -> int:
     from analysis.study_cells import (
         StudySetup,
         check_cells,
+        check_transit,
         task_cells,
     )
     from daq.store.disk_space import no_margin
@@ -80,6 +81,9 @@ def run(args: argparse.Namespace) -> int:
     bad = check_cells(setup, table)
     if bad is not None:
         raise CliError(str(sf.error(("parameters", bad[0]), bad[1])))
+    too_short = check_transit(setup, table)
+    if too_short is not None:
+        raise CliError(str(sf.error(("simulation", "duration"), too_short[1])))
     digest = sf.digest(base.to_yaml())
     tasks = task_cells(table.n_cells, study.run.cells_per_task)
     out: Path = args.out if args.out is not None else Path(f"{study.name}.h5")

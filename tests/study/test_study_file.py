@@ -292,3 +292,29 @@ def test_a_latin_hypercube_that_cannot_sample_is_refused_saying_why(
 ) -> None:
     with pytest.raises(ConfigError, match=expect):
         parse_study(LHS.replace(old, new))
+
+
+def test_a_window_that_cannot_hold_the_transit_to_the_far_end_is_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A study checked its window against the burst only: 31 cylinders at 0.5 N need about
+    0.96 ms for the burst to reach the far end, so a 1.2 ms window ran every cell, stored
+    "ok", with a far end that nothing had reached yet. The cell that needs the longest window
+    is named (here the slower chain and the longer, 6.63 kHz burst)."""
+    text = (
+        TINY.replace("  n_cylinders: 5", "  n_cylinders: 31")
+        .replace("[3 N, 6 N]", "[0.5 N, 6 N]")
+        .replace("duration: 2 ms", "duration: 1.2 ms")
+    )
+    p = tmp_path / "s.yaml"
+    p.write_text(text)
+    out = tmp_path / "s.h5"
+    assert main(["study", str(p), "--workers", "0", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1, err
+    assert f"{p}:11: simulation.duration: 1.2 ms cannot hold the rtl burst" in err, err
+    assert "preload = 0.5 N" in err and "over 30 contacts" in err and "give at least" in err
+    assert not out.exists()
+    ok = tmp_path / "ok.yaml"
+    ok.write_text(text.replace("duration: 1.2 ms", "duration: 2 ms"))
+    assert main(["study", str(ok), "--dry-run", "--out", str(out)]) == 0
