@@ -140,7 +140,9 @@ class RunResult:
     ``unconfirmed``: what could not be confirmed safe (status "unsafe"), each naming the
     instrument; ``safe_state_s``: seconds from the end request (abort, fault, last point) to
     the confirmed safe state. ``points_failed_only``: the run went through every point but
-    some failed (exit status 4; ``--resume`` re-measures them).
+    some failed (exit status 4; ``--resume`` re-measures them). ``file_written``: the run
+    file was made (or, ``resumed``, opened to continue); False where the run ended before
+    (an abort or a failure at its start), so that no line names a file that does not exist.
     """
 
     status: str
@@ -155,6 +157,8 @@ class RunResult:
     unconfirmed: tuple[str, ...] = ()
     safe_state_s: float | None = None
     points_failed_only: bool = False
+    file_written: bool = True
+    resumed: bool = False
 
 
 class RunEngine:
@@ -468,6 +472,8 @@ class RunEngine:
                 unconfirmed=tuple(unconfirmed),
                 safe_state_s=None if unconfirmed else safe_s,
                 points_failed_only=points_failed_only,
+                file_written=self._writer is not None,
+                resumed=self.resume_mode,
             )
             self._emit(
                 EventKind.FINISHED,

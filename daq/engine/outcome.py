@@ -91,7 +91,17 @@ def final_line(result: Any) -> str:
             f"complete: {result.n_done} points in {result.wall_s:.1f} s "
             f"({counts_text(result)}){safe} -> {result.path}"
         )
-    return f"{outcome_text(result)}; {counts_text(result)}{safe} (file {result.path})"
+    return f"{outcome_text(result)}; {counts_text(result)}{safe} ({_file_words(result)})"
+
+
+def _file_words(result: Any) -> str:
+    """Where the points are: the file, or that none was written (a run ended before it made
+    its file; a resume before it opened it: the file is as it was)."""
+    if getattr(result, "file_written", True):
+        return f"file {result.path}"
+    if getattr(result, "resumed", False):
+        return f"file {result.path} not opened: unchanged"
+    return f"no file written: {result.path} was not made"
 
 
 def outcome_text(result: Any) -> str:

@@ -456,3 +456,22 @@ def test_an_unsafe_end_after_failed_points_still_says_unsafe_and_what_to_switch_
     assert exit_code(result) == ExitCode.UNSAFE
     for text in (final_line(result), outcome_text(result)):
         assert text.startswith("run UNSAFE (") and "SWITCH OFF BY HAND: generator output 1" in text
+
+
+def test_an_abort_before_the_file_is_made_says_no_file_was_written(protocol, bench, out) -> None:
+    """A second reader (the window): an abort that landed before the run made its file ended
+    with "(file RUN.h5)", naming a file that was never written."""
+    from daq.engine.outcome import final_line
+
+    eng = RunEngine(protocol, bench, fake_bench(FakeWorld()), out)
+    eng.abort("aborted by the user")  # before the run reached its file
+    res = eng.run()
+    assert res.status == "aborted" and not out.exists()
+    assert res.file_written is False
+    line = final_line(res)
+    assert f"no file written: {out} was not made" in line and f"(file {out})" not in line
+    resumed = RunEngine(protocol, bench, fake_bench(FakeWorld()), out, resume=True)
+    resumed.abort("aborted by the user")
+    res = resumed.run()
+    assert res.resumed and not res.file_written
+    assert f"(file {out} not opened: unchanged)" in final_line(res)
