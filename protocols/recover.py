@@ -2,15 +2,25 @@
 
 A process killed while writing with SWMR leaves the superblock's "file consistency flags" set,
 and HDF5 then refuses to open the file for writing ("may use h5clear"). The data is intact
-(every point was flushed). :func:`clear_consistency_flags` does what ``h5clear -s`` does: it
-zeroes the flags byte of a version 2+ superblock and rewrites the superblock checksum (Bob
-Jenkins' lookup3, as HDF5 computes it). :class:`ClearedView` lets a reader see the file as if
-cleared without writing a byte (``biafc figures`` on a killed file).
+(every point was flushed). :func:`clear_consistency_flags` does what ``h5clear -s
+--increment=0`` does: it zeroes the flags byte of a version 2+ superblock, raises the
+superblock's end-of-file address (EOA) to the file's size where it lies below, and rewrites
+the superblock checksum (Bob Jenkins' lookup3, as HDF5 computes it).
+
+The EOA matters: under SWMR a dataset's flush writes its chunks and their index at the end of
+the file, but only a flush of the whole file writes the superblock's EOA. A writer killed
+between the two (a point's records flushed, the point not yet marked done) leaves bytes in use
+beyond the EOA: HDF5 refuses to read them ("addr overflow"), and the next writer (a resume, a
+repair) allocates over them, destroying measured points (a second reader; before,
+``--resume`` or ``biafc repair`` of such a file lost every point). :class:`ClearedView` lets
+a reader see the file as if cleared without writing a byte (``biafc figures`` on a killed
+file).
 """
 
 from __future__ import annotations
 
 import io
+import os
 import struct
 from pathlib import Path
 from typing import Any
@@ -75,40 +85,31 @@ def lookup3(data: bytes, initval: int = 0) -> int:
 
 
 def clear_consistency_flags(path: str | Path) -> bool:
-    """Clear the SWMR-write flags of ``path``; True when something was cleared.
+    """Clear the SWMR-write flags of ``path`` and raise a stale end-of-file address to the
+    file's size; True when something was cleared.
 
     Only a superblock of version 2 or later at offset 0 is handled (what ``libver="latest"``
     writes); anything else is left alone (returns False).
     """
     p = Path(path)
     with p.open("r+b") as f:
-        head = f.read(12)
-        if len(head) < 12 or head[:8] != _SIGNATURE or head[8] < 2:
+        head = f.read(64)
+        block = _cleared_superblock(head, os.fstat(f.fileno()).st_size)
+        if block is None:
             return False
-        size_offsets = head[9]
-        n = 12 + 4 * size_offsets
-        f.seek(0)
-        block = bytearray(f.read(n + 4))
-        if len(block) < n + 4:
-            return False
-        (stored,) = struct.unpack_from("<I", block, n)
-        if lookup3(bytes(block[:n])) != stored:
-            return False  # not the layout we know: never write into it
-        if block[11] == 0:
-            return False
-        block[11] = 0
-        struct.pack_into("<I", block, n, lookup3(bytes(block[:n])))
         f.seek(0)
         f.write(block)
     return True
 
 
-def _cleared_superblock(head: bytes) -> bytes | None:
-    """The superblock at the start of ``head`` with its consistency flags cleared and its
-    checksum rewritten, or ``None`` when there is nothing to clear (or not a layout we know)."""
-    if len(head) < 12 or head[:8] != _SIGNATURE or head[8] < 2:
+def _cleared_superblock(head: bytes, file_size: int) -> bytes | None:
+    """The superblock at the start of ``head`` with its consistency flags cleared, its EOA at
+    least ``file_size`` (bytes) and its checksum rewritten, or ``None`` when there is nothing
+    to clear (or not a layout we know: then nothing is ever written into it)."""
+    if len(head) < 12 or head[:8] != _SIGNATURE or head[8] < 2 or head[9] not in (2, 4, 8):
         return None
-    n = 12 + 4 * head[9]
+    size_offsets = head[9]
+    n = 12 + 4 * size_offsets
     if len(head) < n + 4:
         return None
     block = bytearray(head[: n + 4])
@@ -116,6 +117,13 @@ def _cleared_superblock(head: bytes) -> bytes | None:
     if lookup3(bytes(block[:n])) != stored or block[11] == 0:
         return None
     block[11] = 0
+    # base address, superblock extension address, end-of-file address, root group address
+    fmt = {2: "<H", 4: "<I", 8: "<Q"}[size_offsets]
+    (base,) = struct.unpack_from(fmt, block, 12)
+    at = 12 + 2 * size_offsets
+    (eoa,) = struct.unpack_from(fmt, block, at)
+    if base + eoa < file_size:  # bytes a killed writer flushed past the recorded end
+        struct.pack_into(fmt, block, at, file_size - base)
     struct.pack_into("<I", block, n, lookup3(bytes(block[:n])))
     return bytes(block)
 
@@ -123,12 +131,13 @@ def _cleared_superblock(head: bytes) -> bytes | None:
 def has_consistency_flags(path: str | Path) -> bool:
     """Whether ``path`` carries the "open for write" flags of a writer that never closed it."""
     with Path(path).open("rb") as f:
-        return _cleared_superblock(f.read(64)) is not None
+        return _cleared_superblock(f.read(64), 0) is not None
 
 
 class ClearedView(io.RawIOBase):
-    """A read-only view of an HDF5 file as if ``h5clear -s`` had run: the superblock's
-    consistency flags read as cleared, every other byte as on disk. The file itself is never
+    """A read-only view of an HDF5 file as if :func:`clear_consistency_flags` had run: the
+    superblock's consistency flags read as cleared and its end-of-file address as at least
+    the file's size, every other byte as on disk. The file itself is never
     written, so a reader (``biafc figures``) opens a killed run file without changing it::
 
         with ClearedView(path) as raw, h5py.File(raw, "r") as f: ...
@@ -138,7 +147,7 @@ class ClearedView(io.RawIOBase):
         super().__init__()
         self._f = Path(path).open("rb")
         head = self._f.read(64)
-        self._patch = _cleared_superblock(head) or b""
+        self._patch = _cleared_superblock(head, os.fstat(self._f.fileno()).st_size) or b""
         self._f.seek(0)
 
     def readable(self) -> bool:

@@ -556,8 +556,9 @@ class RunFileWriter:
             self.broken = (
                 f"{self.path}: the records of point {direction} amplitude #{amplitude_index + 1} "
                 f"cylinder #{cylinder_index + 1} could not be written ({why}): the file is left "
-                f"as a killed writer's; free some space, then run_protocol --resume {self.path} "
-                f"(or biafc repair {self.path} to read it as it is)"
+                f"as a killed writer's; if its disk is full, free some space; then "
+                f"run_protocol --resume {self.path} (or biafc repair {self.path} to read it as it "
+                "is)"
             )
             leave_open(self.path)
             raise RunFileError(self.broken) from None

@@ -316,8 +316,8 @@ class StudyStore:
             why = first_line(exc)
             self.broken = (
                 f"{self.path}: task {task} could not be written ({why}): the output is left as "
-                f"a killed writer's; free some space, then biafc repair {self.path} and run "
-                "the study again to continue"
+                f"a killed writer's; if its disk is full, free some space; then biafc repair "
+                f"{self.path} and run the study again to continue"
             )
             leave_open(self.path)
             raise StudyFileError(self.broken) from None

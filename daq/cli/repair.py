@@ -1,7 +1,9 @@
 """``biafc repair RUN.h5 [RUN.h5 ...]``: make run files and study outputs (``biafc study``) left
 by a killed writer readable by any
 HDF5 reader, without losing a point (:mod:`daq.store.repair`). Exit 0 when every file opens
-with plain h5py afterwards; 2 when one is refused (not a run file, written by a live process)."""
+with plain h5py afterwards; 2 when one is refused (not a run file, written by a live process);
+1 when a repair failed on the way (HDF5 could not write the file, or damage remained after
+clearing it): one line naming the file, never a traceback."""
 
 from __future__ import annotations
 
@@ -29,4 +31,8 @@ def run(args: argparse.Namespace) -> int:
         except StoreError as exc:
             print(f"biafc repair: refused: {exc}", file=sys.stderr)
             code = 2
+        except Exception as exc:  # HDF5 or damage found where none was expected: one line
+            first = str(exc).splitlines()[0] if str(exc) else ""
+            print(f"biafc repair: failed: {path}: {type(exc).__name__}: {first}", file=sys.stderr)
+            code = max(code, 1)
     return code

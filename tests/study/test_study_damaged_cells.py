@@ -78,3 +78,28 @@ def test_a_damaged_chunk_at_the_end_of_a_dataset_is_cleared_too(tmp_path: Path) 
         assert np.isnan(f["spectra/ltr"][4:8]).all() and (f["spectra/ltr"][:4] == 1).all()
         assert f.attrs["status"] == "incomplete"
     assert damaged_cells(path) == [] and clear_damaged_cells(path) is None
+
+
+def test_a_repair_that_fails_on_the_way_says_so_in_one_line(
+    serial_reference: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:  # fmt: skip
+    """A second reader: damage that the clearing did not remove (or HDF5 refusing the clearing's
+    write) ended ``biafc repair`` in a traceback of DamagedCellsError or OSError."""
+    import protocols.damaged_cells
+
+    out = tmp_path / "s.h5"
+    shutil.copy(serial_reference, out)
+    _damage(out, "metrics/asymmetry_ratio", 0)
+
+    def cannot_write(path: Path) -> str | None:
+        raise OSError("Can't write unprocessed chunk data (addr overflow)")
+
+    monkeypatch.setattr(protocols.damaged_cells, "clear_damaged_cells", cannot_write)
+    assert main(["repair", str(out)]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"biafc repair: failed: {out}: OSError: "), err
+    monkeypatch.setattr(protocols.damaged_cells, "clear_damaged_cells", lambda path: None)
+    assert main(["repair", str(out)]) == 1  # cleared nothing: the damage remains
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "DamagedCellsError" in err[0] and "checksum" in err[0], err
