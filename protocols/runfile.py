@@ -59,7 +59,8 @@ and nowhere else. Layout (see the design notes)::
                       is all of it on an undamped chain; largest magnitude), and for the simulated
                       bench dem_runs_json: a JSON list with one entry per DEM run (direction,
                       kind, amplitude and its units, the same indicators). ``biafc simulate``
-                      writes them at creation; the run engine when the file closes.
+                      writes them at creation; the run engine when the file closes (a
+                      resume: the earlier sessions' runs, then its own, the worst over all).
 
 Fields added after the first files (files before 2026-11-28 lack them, and readers take them
 as empty, NaN or no rows): ``fail_reason``, ``sensitivity_m_per_s_per_V``,
@@ -638,6 +639,16 @@ class RunFileWriter:
         if v is None:
             return None
         return json.loads(v.decode() if isinstance(v, bytes) else str(v))
+
+    def earlier_dem_runs(self) -> list[dict[str, Any]]:
+        """The DEM runs an earlier session of this file recorded (``/simulation`` attribute
+        ``dem_runs_json``; empty when none): a resume keeps them beside its own."""
+        if "simulation" not in self._f:
+            return []
+        v = self._f["simulation"].attrs.get("dem_runs_json")
+        if v is None:
+            return []
+        return list(json.loads(v.decode() if isinstance(v, bytes) else str(v)))
 
     def done_mask(self, direction: str) -> NDArray[np.uint8]:
         """The ``done`` array ``[A, C]`` of one direction."""

@@ -499,8 +499,10 @@ class RunEngine:
         return None if self._writer is None else self._writer.broken
 
     def _simulation_attrs(self) -> dict[str, Any] | None:
-        """``/simulation`` attributes of a simulated-bench run: the DEM runs served during this
-        run (each with its error estimate) and their worst indicators; ``None`` otherwise."""
+        """``/simulation`` attributes of a simulated-bench run: the DEM runs served to this file
+        (each with its error estimate; a resume's after those of the sessions before it) and
+        their worst indicators; ``None`` otherwise. Before, a resume's attributes described its
+        own runs only: the worst error estimate of the file's points was lost."""
         take = getattr(self.instruments.world, "take_dem_runs", None)
         if take is None:
             return None
@@ -510,6 +512,11 @@ class RunEngine:
             return None
         if not runs:
             return None
+        if self.resume_mode and self._writer is not None:
+            try:
+                runs = self._writer.earlier_dem_runs() + runs
+            except (OSError, ValueError, TypeError):
+                pass  # unreadable: this session's runs, as before
         err = [float(r.get("error_estimate_rel", np.nan)) for r in runs]
         res = [float(r.get("work_not_in_chain_rel", np.nan)) for r in runs]
         finite = [x for x in res if np.isfinite(x)]

@@ -40,3 +40,37 @@ def test_sim_bench_run_file_holds_dem_error_estimates(tmp_path: Path) -> None:
     assert {r["direction"] for r in runs} == {"ltr"}
     assert all(r["amplitude_units"] == "m" and r["amplitude"] > 0 for r in runs)
     assert max(r["error_estimate_rel"] for r in runs) == sim["error_estimate_rel"]
+
+
+def test_a_resumed_run_keeps_the_earlier_sessions_dem_runs(tmp_path: Path) -> None:
+    """A second reader: after a resume, /simulation described the resume's own DEM runs only
+    (dem_runs 1, the second amplitude), so the worst error estimate of the points measured
+    before the interruption was lost from the file."""
+    from daq.connect import connect_bench
+    from daq.engine import EventKind, RunEngine
+    from protocols.bench import load_bench
+    from protocols.schema import load_protocol
+
+    out = tmp_path / "run.h5"
+    inst = connect_bench(load_bench())
+    eng = RunEngine(load_protocol(ROOT / "smoke.yaml"), load_bench(), inst, out)
+    done = []
+
+    def stop_after_the_first_amplitude(e: object) -> None:
+        if getattr(e, "kind", None) == EventKind.POINT_DONE:
+            done.append(e)
+            if len(done) == 3:
+                eng.abort("test: after the first amplitude")
+
+    eng.subscribe(stop_after_the_first_amplitude)
+    try:
+        assert eng.run().status == "aborted"
+    finally:
+        inst.close()
+    first = json.loads(read_run(out).simulation["dem_runs_json"])
+    assert [r["amplitude"] for r in first] == [5e-07]
+    assert rp.main(["--resume", str(out), "--quiet"]) == 0
+    sim = read_run(out).simulation
+    runs = json.loads(sim["dem_runs_json"])
+    assert [r["amplitude"] for r in runs] == [5e-07, 3e-06] and sim["dem_runs"] == 2
+    assert sim["error_estimate_rel"] == max(r["error_estimate_rel"] for r in runs)
