@@ -564,7 +564,9 @@ class RunEngine:
         snap["read_back"] = read_back
         config = getattr(inst.world, "config", None)
         if config is not None:
-            snap["simulation_model"] = _jsonable(config)
+            from sim_backend.dem.versions import model_version
+
+            snap["simulation_model"] = {**_jsonable(config), "model_version": model_version()}
         return snap
 
     def _configure_digitiser(self) -> NDArray[np.float64]:

@@ -19,7 +19,7 @@ import numpy as np
 from protocols.bench import BenchFile, parse_bench
 from protocols.yamlfile import ConfigError
 
-__all__ = ["IGNORED_FIELDS", "bench_differences", "chain_differences"]
+__all__ = ["IGNORED_FIELDS", "bench_differences", "chain_differences", "model_differences"]
 
 #: dotted fields that may differ between the start and a resume (they cannot change the data)
 IGNORED_FIELDS = (
@@ -120,3 +120,22 @@ def chain_differences(
         for key in sorted(set(a) | set(b))
         if a.get(key) != b.get(key)
     ]
+
+
+def model_differences(
+    stored_model: dict[str, Any] | None, bench: BenchFile, source: str = "the file"
+) -> list[str]:
+    """The simulated bench's model version (:func:`sim_backend.dem.versions.model_version`)
+    a run was measured with against this software's, one line when they differ or the file
+    did not record it (made before 2026-11-28): points of two DEM kernels would mix in one
+    file. Empty for a lab bench."""
+    if bench.bench.simulation is None or stored_model is None:
+        return []
+    from sim_backend.dem.versions import model_version
+
+    now = model_version()
+    then = stored_model.get("model_version")
+    if then == now:
+        return []
+    said = repr(then) if then else "not recorded"
+    return [f"simulated bench model: {said} in {source}, {now!r} now"]

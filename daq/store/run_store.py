@@ -22,7 +22,7 @@ from typing import Any, Literal
 import numpy as np
 
 from daq.store.recover import clear_consistency_flags
-from daq.store.resume_check import bench_differences, chain_differences
+from daq.store.resume_check import bench_differences, chain_differences, model_differences
 from daq.store.writable import cannot_write
 from protocols.bench import BenchFile
 from protocols.legacy import upgrade_protocol_text
@@ -211,6 +211,17 @@ def _stored_chain_spec(snapshot_json: Any) -> dict[str, Any] | None:
     return spec if isinstance(spec, dict) else None
 
 
+def _stored_model(snapshot_json: Any) -> dict[str, Any] | None:
+    """The simulated bench's model as a run recorded it (``/snapshot``'s
+    ``simulation_model``), or None (a lab bench's run)."""
+    try:
+        text = snapshot_json.decode() if isinstance(snapshot_json, bytes) else str(snapshot_json)
+        model = json.loads(text).get("simulation_model")
+    except (ValueError, AttributeError):
+        return None
+    return model if isinstance(model, dict) else None
+
+
 def check_resume(
     path: Path,
     pf: ProtocolFile,
@@ -271,6 +282,7 @@ def check_resume(
     if bench is not None:
         diffs = bench_differences(text["bench_yaml"], bench, str(path))
         diffs += chain_differences(_stored_chain_spec(snapshot_json), bench, str(path))
+        diffs += model_differences(_stored_model(snapshot_json), bench, str(path))
         if diffs and not accept_bench_change:
             raise StoreError(
                 f"--resume: {path} was started on another bench ({len(diffs)} difference(s): "

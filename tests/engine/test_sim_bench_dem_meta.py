@@ -6,6 +6,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from daq.cli import run_protocol as rp
 from protocols.runfile import ChainInfo, RunFileWriter, ScanSpec, read_run
@@ -42,16 +43,13 @@ def test_sim_bench_run_file_holds_dem_error_estimates(tmp_path: Path) -> None:
     assert max(r["error_estimate_rel"] for r in runs) == sim["error_estimate_rel"]
 
 
-def test_a_resumed_run_keeps_the_earlier_sessions_dem_runs(tmp_path: Path) -> None:
-    """A second reader: after a resume, /simulation described the resume's own DEM runs only
-    (dem_runs 1, the second amplitude), so the worst error estimate of the points measured
-    before the interruption was lost from the file."""
+def _aborted_after_the_first_amplitude(out: Path) -> None:
+    """A smoke run on the simulated bench into ``out``, aborted after its first 3 points."""
     from daq.connect import connect_bench
     from daq.engine import EventKind, RunEngine
     from protocols.bench import load_bench
     from protocols.schema import load_protocol
 
-    out = tmp_path / "run.h5"
     inst = connect_bench(load_bench())
     eng = RunEngine(load_protocol(ROOT / "smoke.yaml"), load_bench(), inst, out)
     done = []
@@ -67,6 +65,14 @@ def test_a_resumed_run_keeps_the_earlier_sessions_dem_runs(tmp_path: Path) -> No
         assert eng.run().status == "aborted"
     finally:
         inst.close()
+
+
+def test_a_resumed_run_keeps_the_earlier_sessions_dem_runs(tmp_path: Path) -> None:
+    """A second reader: after a resume, /simulation described the resume's own DEM runs only
+    (dem_runs 1, the second amplitude), so the worst error estimate of the points measured
+    before the interruption was lost from the file."""
+    out = tmp_path / "run.h5"
+    _aborted_after_the_first_amplitude(out)
     first = json.loads(read_run(out).simulation["dem_runs_json"])
     assert [r["amplitude"] for r in first] == [5e-07]
     assert rp.main(["--resume", str(out), "--quiet"]) == 0
@@ -74,3 +80,29 @@ def test_a_resumed_run_keeps_the_earlier_sessions_dem_runs(tmp_path: Path) -> No
     runs = json.loads(sim["dem_runs_json"])
     assert [r["amplitude"] for r in runs] == [5e-07, 3e-06] and sim["dem_runs"] == 2
     assert sim["error_estimate_rel"] == max(r["error_estimate_rel"] for r in runs)
+
+
+def test_a_resume_by_another_model_version_is_a_bench_difference(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A second reader: a simulated run resumed after the DEM kernel's arithmetic changed
+    was continued without a word, its points made by two kernels. The model version is in the
+    snapshot, and another is a bench difference: refused, or recorded with
+    --accept-bench-change."""
+    from sim_backend.dem import versions
+
+    out = tmp_path / "run.h5"
+    _aborted_after_the_first_amplitude(out)
+    import h5py
+
+    with h5py.File(out, "r") as f:
+        model = json.loads(f["snapshot"].attrs["json"])["simulation_model"]
+    assert model["model_version"] == versions.model_version()
+    monkeypatch.setattr(versions, "model_version", lambda: "kernel 9: another; modes 2")
+    assert rp.main(["--resume", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "simulated bench model: " in err and "'kernel 9: another; modes 2' now" in err, err
+    assert read_run(out).status == "aborted"  # refused: not touched
+    assert rp.main(["--resume", str(out), "--quiet", "--accept-bench-change"]) == 0
+    overrides = json.loads(read_run(out).attrs["bench_overrides_json"])
+    assert any("simulated bench model" in d for d in overrides[-1]["differences"])
