@@ -200,3 +200,57 @@ def test_repair_rebuilds_a_file_that_takes_no_more_writes(
     for d, mask in _done(killed).items():
         np.testing.assert_array_equal(mask, done[d])
     assert not list(tmp_path.glob(".heap.h5.*.repair"))
+
+
+#: loaded into the run's process (``sitecustomize``): SIGKILL it at the ``KILL_AFTER_RECORDS``-th
+#: point whose records are flushed, before the file's flush that marks the point done
+_KILL_HOOK = textwrap.dedent(
+    """
+    import os, signal
+    import h5py
+    _at = int(os.environ["KILL_AFTER_RECORDS"])
+    _seen = [0, False]
+    _ds_flush, _file_flush = h5py.Dataset.flush, h5py.File.flush
+    def _ds(self):
+        _ds_flush(self)
+        if self.name.endswith("/drive"):
+            _seen[0] += 1
+            _seen[1] = True
+    def _file(self):
+        if _seen[1] and _seen[0] == _at:
+            os.kill(os.getpid(), signal.SIGKILL)
+        _seen[1] = False
+        _file_flush(self)
+    h5py.Dataset.flush, h5py.File.flush = _ds, _file
+    """
+)
+
+
+def test_a_kill_between_a_points_records_and_its_done_mark_loses_no_point(
+    proto_file, tmp_path
+) -> None:
+    """A second reader: under SWMR a point's records are flushed before the file's flush that
+    writes the superblock's end-of-file address and marks the point done. Killed between the
+    two, the file held chunks past that address; --resume (or biafc repair) allocated over
+    them and lost every measured point, or ended 'complete' with a file no tool read."""
+    hook = tmp_path / "hook"
+    hook.mkdir()
+    (hook / "sitecustomize.py").write_text(_KILL_HOOK)
+    reference = tmp_path / "reference.h5"
+    assert rp.main([str(proto_file), "--out", str(reference), "--seed", "5", "-q"]) == 0
+    killed = tmp_path / "killed.h5"
+    env = dict(os.environ, KILL_AFTER_RECORDS="3", PYTHONPATH=f"{hook}{os.pathsep}{ROOT}")
+    proc = subprocess.run(
+        [sys.executable, "-m", "daq.cli.run_protocol", str(proto_file), "--out", str(killed),
+         "--seed", "5", "-q"],
+        env=env, cwd=ROOT, capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert proc.returncode == -9, proc.stderr
+    assert rp.main(["--resume", str(killed), "-q"]) == 0
+    a, b = read_run(reference), read_run(killed)
+    assert b.status == "complete"
+    for d, scan in a.scans.items():
+        np.testing.assert_array_equal(scan.done, b.scans[d].done)
+        np.testing.assert_array_equal(scan.velocity, b.scans[d].velocity)
+    assert _plain_h5py_opens(killed)
+    assert biafc(["repair", str(killed)]) == 0
