@@ -28,7 +28,15 @@ __all__ = [
     "linear_limit_cylinder",
     "peak_search_range_Hz",
     "resonance_band_index",
+    "signal_band_Hz",
 ]
+
+#: the signal band reaches this fraction of f_in beyond the input and the expected edge (the
+#: converted line overshoots the far cylinder's edge: 7.16 kHz at 4 um for the 8.03 kHz LTR
+#: cutoff of the default chain, 10 % of f_in)
+SIGNAL_BAND_MARGIN = 0.15
+#: ... and at least this many of the burst's spectral sigmas
+SIGNAL_BAND_SIGMAS = 3.0
 
 
 def _check_direction(direction: str) -> None:
@@ -148,3 +156,29 @@ def peak_search_range_Hz(
     if not (math.isfinite(lo) and math.isfinite(hi)):
         return 0.5 * f_in_Hz, 1.5 * f_in_Hz
     return 0.7 * lo, 1.3 * hi
+
+
+def signal_band_Hz(
+    f_in_Hz: float,
+    direction: str,
+    onset_Hz: NDArray[np.float64],
+    cutoff_Hz: NDArray[np.float64],
+    sigma_f_Hz: float | None = None,
+) -> tuple[float, float]:
+    """Frequency range (Hz) where the far end's signal can be: the burst's band and the
+    converted band, from the lower to the higher of ``f_in_Hz`` and the expected output
+    (:func:`expected_output_Hz`), widened on both sides by the larger of
+    :data:`SIGNAL_BAND_SIGMAS` burst sigmas ``sigma_f_Hz`` and :data:`SIGNAL_BAND_MARGIN` x
+    ``f_in_Hz``; inside :func:`peak_search_range_Hz`, which it is when the chain has no band.
+    The noise floor is decided over it (:mod:`analysis.noise_floor`)."""
+    search = peak_search_range_Hz(f_in_Hz, onset_Hz, cutoff_Hz)
+    if not (np.any(np.isfinite(onset_Hz)) and np.any(np.isfinite(cutoff_Hz))):
+        return search
+    f_exp = expected_output_Hz(f_in_Hz, direction, onset_Hz, cutoff_Hz)
+    if not math.isfinite(f_exp):
+        return search
+    sigma = sigma_f_Hz if sigma_f_Hz is not None and math.isfinite(sigma_f_Hz) else 0.0
+    w = max(SIGNAL_BAND_SIGMAS * sigma, SIGNAL_BAND_MARGIN * f_in_Hz)
+    lo = max(search[0], min(f_in_Hz, f_exp) - w)
+    hi = min(search[1], max(f_in_Hz, f_exp) + w)
+    return lo, hi

@@ -14,15 +14,15 @@ the entry cylinder was not measured get ``"not measured"``, ``"failed: entry poi
 far) where that point was measured and failed, and ``"not scanned: far cylinder 31"`` (or
 entry) where the scan does not hold that cylinder.
 
-Noise (:mod:`analysis.noise_floor`): a point whose far record holds no more than the noise of
-its own pre-trigger samples is ``"none"``, and says so (``at_noise_floor``, its transmission
-only as an upper bound, no output peak): nothing passed that the bench could see. When the
-linear reference is itself at the noise floor, every gain is a lower bound; a point that stands
-above the noise and has moved from the input, but whose lower bound stays below ``GAIN_MIN``,
-is ``"undetermined"``: the run cannot tell whether the nonlinearity let it through. A point
-above the noise without a line inside the search range (its largest value on the range's edge)
-is ``"undetermined"`` when it passes by the energy rule (or may, its gain a lower bound), else
-``"none"``.
+Noise (:mod:`analysis.noise_floor`): a point whose far record holds, within the band where the
+signal can be, no more than the noise of its own pre-trigger samples there is ``"none"``, and
+says so (``at_noise_floor``, its transmission only as an upper bound, no output peak): nothing
+passed that the bench could see. When the linear reference is itself at the noise floor, every
+gain is a lower bound; a point that stands above the noise and has moved from the input, but
+whose lower bound stays below ``GAIN_MIN``, is ``"undetermined"``: the run cannot tell whether
+the nonlinearity let it through. A point above the noise without a line inside the search range
+(its largest value on the range's edge) is ``"undetermined"`` when it passes by the energy rule
+(or may, its gain a lower bound), else ``"none"``.
 
 Why a gain and not a level: a short burst is broad, and in the linear regime its tail near the
 frequency where the end cylinders' bands nearly meet leaks through (about 1e-3 of the energy
@@ -150,9 +150,10 @@ def summary_rows(sweep: AmplitudeSweep, scan: ScanData | None = None) -> list[di
 
 def summarize(run: RunData) -> dict[str, Any]:
     """Summary of a run: ``{"file", "status", "backend", "far_cylinder", "output_peak",
-    "points", "noise_unknown", "rows": [...]}``; ``output_peak`` says per direction what
-    ``output_Hz`` (f_out) is; ``noise_unknown``: the directions whose measured far records
-    have no pre-trigger samples to estimate the noise from.
+    "points", "noise_unknown", "noise_band_Hz", "rows": [...]}``; ``output_peak`` says per
+    direction what ``output_Hz`` (f_out) is; ``noise_unknown``: the directions whose measured
+    far records have no pre-trigger samples to estimate the noise from; ``noise_band_Hz``: per
+    direction, the band over which the far record is set against its noise.
 
     ``rows`` holds one dict per direction and amplitude (see :func:`summary_rows`).
     """
@@ -161,8 +162,10 @@ def summarize(run: RunData) -> dict[str, Any]:
     peak: dict[str, str] = {}
     points: dict[str, dict[str, int]] = {}
     unknown: list[str] = []
+    noise_band: dict[str, list[float]] = {}
     for direction, scan in run.scans.items():
         sweep = amplitude_sweep(scan, run.chain)
+        noise_band[direction] = [float(f) for f in sweep.signal_band_Hz]
         if sweep.far_measured.any() and not sweep.noise_known:
             unknown.append(direction)
         far[direction] = sweep.far
@@ -181,6 +184,7 @@ def summarize(run: RunData) -> dict[str, Any]:
         "output_peak": peak,
         "points": points,
         "noise_unknown": unknown,
+        "noise_band_Hz": noise_band,
         "rows": rows,
     }
 
@@ -217,9 +221,14 @@ def format_summary(summary: dict[str, Any]) -> str:
             f"{r['conversion']}"
         )
     if any(r.get("at_noise_floor") for r in summary["rows"]):
+        bands = ", ".join(
+            f"{d} {lo / 1e3:.2f}-{hi / 1e3:.2f} kHz"
+            for d, (lo, hi) in summary.get("noise_band_Hz", {}).items()
+        )
         lines.append(
-            "<x: the far end held less than 4x the energy its own pre-trigger noise gives; "
-            "the ratio is at most x and no output peak is given"
+            "<x: the far end held less than 4x the energy its own pre-trigger noise gives "
+            f"within the band where the signal can be ({bands}); the ratio is at most x (the "
+            "far end's energy in that band over E_in) and no output peak is given"
         )
     if any(r.get("gain_is_lower_bound") for r in summary["rows"]):
         lines.append(

@@ -14,12 +14,16 @@ gain grows only when the contacts act nonlinearly. It therefore needs the smalle
 the sweep to be in the linear regime (dynamic overlap well below the static one, about 1 um
 for the default chain), and is NaN when fewer than two amplitudes were measured.
 
-Noise (:mod:`analysis.noise_floor`). Where the far record holds no more than the noise its
-pre-trigger samples show (``at_noise_floor``), its transmission is only bounded from above
-(``transmission_bound``), its spectral peak is a noise line and is not given (``output_Hz`` and
-``detuning_Hz`` NaN), and it has no gain. When the smallest amplitude is at the noise floor, the
-linear reference is the tightest such bound below the first amplitude that stands above the
-noise (``reference_is_bound``), and every gain is then a lower bound.
+Noise (:mod:`analysis.noise_floor`). Where the far record holds, within the band where the
+signal can be (:func:`analysis.bands.signal_band_Hz`), no more than the noise its pre-trigger
+samples show there (``at_noise_floor``), its transmission is only bounded from above
+(``transmission_bound``, 4 x the noise's energy in that band over E_entry: a bound on the far
+end's signal within the band; the transmission itself stays the whole records' E_far/E_entry),
+its spectral peak is a noise line and is not given (``output_Hz`` and ``detuning_Hz`` NaN), and
+it has no gain. When the smallest amplitude is at the noise floor, the linear reference is the
+tightest such bound below the first amplitude that stands above the noise
+(``reference_is_bound``), and every gain is then a lower bound, unless the first amplitude
+above the noise passes no more than that bound: then it is the reference.
 """
 
 from __future__ import annotations
@@ -36,8 +40,9 @@ from analysis.bands import (
     expected_output_Hz,
     far_cylinder,
     peak_search_range_Hz,
+    signal_band_Hz,
 )
-from analysis.noise_floor import RESOLVED_FACTOR, noise_energy, resolved
+from analysis.noise_floor import RESOLVED_FACTOR, band_energy, band_noise_energy, resolved
 from analysis.spectra import amplitude_spectrum, peak_frequency
 from analysis.transmission import energy_transmission, signal_energy
 from protocols.runfile import ChainInfo, ScanData
@@ -61,7 +66,13 @@ class AmplitudeSweep:
     ``transmission_gain [A]`` (transmission over the linear reference), ``far_noise_ratio
     [A]`` (the far record's energy over the noise's, NaN without pre-trigger samples),
     ``at_noise_floor [A]`` (measured, and not above the noise), ``transmission_bound [A]`` (an
-    upper bound of the transmission where at the noise floor, NaN elsewhere);
+    upper bound of the transmission where at the noise floor, NaN elsewhere; it bounds the far
+    end's energy within ``signal_band_Hz``, over E_entry);
+    ``signal_transmission [A]``: the far end's signal over E_entry, its energy in
+    ``signal_band_Hz`` less the noise's there (the whole records' ratio where the noise is not
+    known or zero: a model run), which the gains and the linear reference use;
+    ``signal_band_Hz``: the band where the signal can be, over which the far record's energy
+    is set against its noise's (:func:`analysis.bands.signal_band_Hz`);
     ``reference``: the linear reference (E_far / E_entry, NaN without one);
     ``reference_is_bound``: it is such a bound, so the gains are lower bounds;
     ``far_measured [A]``: the far record was measured (whether or not a peak was found);
@@ -81,6 +92,8 @@ class AmplitudeSweep:
     transmission_gain: NDArray[np.float64]
     expected_Hz: float
     f_range_Hz: tuple[float, float]
+    signal_band_Hz: tuple[float, float]
+    signal_transmission: NDArray[np.float64]
     far_noise_ratio: NDArray[np.float64]
     at_noise_floor: NDArray[np.bool_]
     transmission_bound: NDArray[np.float64]
@@ -114,6 +127,17 @@ def input_frequency_Hz(scan: ScanData) -> NDArray[np.float64]:
     return out
 
 
+def burst_sigma_f_Hz(scan: ScanData) -> float | None:
+    """The burst's spectral Gaussian sigma (Hz), ``1 / (2 pi sigma_t)`` with ``sigma_t`` the
+    stored width or ``cycles / (6 f_c)`` (:mod:`instruments.burst`); None when neither is
+    stored."""
+    if scan.width_s is not None and math.isfinite(scan.width_s) and scan.width_s > 0:
+        return 1.0 / (2.0 * math.pi * scan.width_s)
+    if scan.cycles is not None and math.isfinite(scan.cycles) and scan.cycles > 0:
+        return 1.0 / (2.0 * math.pi * scan.cycles / (6.0 * scan.f_center_Hz))
+    return None
+
+
 def amplitude_sweep(scan: ScanData, chain: ChainInfo) -> AmplitudeSweep:
     """The amplitude sweep of one direction (see the module docstring)."""
     n = len(chain.lengths_m)
@@ -135,19 +159,32 @@ def amplitude_sweep(scan: ScanData, chain: ChainInfo) -> AmplitudeSweep:
     spec = amplitude_spectrum(v_far, rate).band(*f_range)
     in_hz = input_frequency_Hz(scan)
     transmission = energy_transmission(v_entry, v_far, rate)
-    e_far = signal_energy(v_far, rate)  # for the noise floor and its bound
+    # the noise floor is decided within the band where the signal can be: over the whole
+    # record, broadband digitiser noise hid a narrowband far-end line 10x above its own band's
+    sig_band = signal_band_Hz(
+        scan.f_center_Hz, scan.direction, onset, cutoff, burst_sigma_f_Hz(scan)
+    )
+    e_far = band_energy(v_far, rate, sig_band)  # for the noise floor and its bound
     e_entry = signal_energy(v_entry, rate)
     far_measured = np.all(np.isfinite(v_far), axis=-1)
     with np.errstate(divide="ignore", invalid="ignore"):
-        noise = noise_energy(v_far, scan.time_s, rate)
+        noise = band_noise_energy(v_far, scan.time_s, rate, sig_band, f_range)
         noise_ratio = np.where(noise > 0, e_far / noise, np.where(noise == 0, np.inf, np.nan))
         # the far record alone decides (its entry point may have failed)
         floor = far_measured & ~resolved(e_far, noise)
         bound = np.where(floor & (e_entry > 0), RESOLVED_FACTOR * noise / e_entry, np.nan)
     # a noise line is no output peak, nor a maximum on the search range's edge
     out_hz = np.where(floor, np.nan, peak_frequency(spec, interior=True))
-    reference, is_bound = linear_reference(scan.amplitudes, transmission, floor, bound)
-    gain = np.where(np.isfinite(transmission) & ~floor, transmission / reference, np.nan)
+    # the gain sets like against like: where the noise is known and not zero, the far end's
+    # signal (its energy in the signal band less the noise's there) over E_entry, the quantity
+    # the bounds bound; the whole records' ratio of a noise-dominated record is mostly noise
+    with np.errstate(divide="ignore", invalid="ignore"):
+        signal_t = np.where(
+            np.isfinite(noise) & (noise > 0), (e_far - noise) / e_entry, transmission
+        )
+    signal_t = np.where(np.isfinite(transmission), signal_t, np.nan)
+    reference, is_bound = linear_reference(scan.amplitudes, signal_t, floor, bound)
+    gain = np.where(np.isfinite(signal_t) & ~floor, signal_t / reference, np.nan)
     return AmplitudeSweep(
         direction=scan.direction,
         amplitudes=np.asarray(scan.amplitudes, dtype=np.float64),
@@ -163,6 +200,8 @@ def amplitude_sweep(scan: ScanData, chain: ChainInfo) -> AmplitudeSweep:
         transmission_gain=gain,
         expected_Hz=expected_output_Hz(scan.f_center_Hz, scan.direction, onset, cutoff),
         f_range_Hz=f_range,
+        signal_band_Hz=sig_band,
+        signal_transmission=signal_t,
         far_noise_ratio=noise_ratio,
         at_noise_floor=floor,
         transmission_bound=bound,
@@ -199,11 +238,14 @@ def linear_reference(
     The transmission at the smallest measured amplitude (finite and > 0) when its far record
     stands above the noise; when it does not, the smallest upper ``bound`` of the points at the
     noise floor below the first amplitude that stands above it (a linear chain passes the same
-    fraction at every amplitude, so each such bound bounds the linear fraction). NaN when fewer
-    than two amplitudes were measured."""
+    fraction at every amplitude, so each such bound bounds the linear fraction), unless that
+    first resolved point's transmission is no larger than the bound: it is then within what the
+    linear regime allows and is the reference itself (not a bound). NaN when fewer than two
+    amplitudes were measured."""
     amps = np.abs(np.asarray(amplitudes, dtype=np.float64))
     t = np.asarray(transmission, dtype=np.float64)
-    ok = np.isfinite(t) & (t > 0)
+    # a point at the noise floor counts by its bound (its signal, noise removed, can be < 0)
+    ok = np.isfinite(t) & ((t > 0) | np.asarray(at_noise_floor, dtype=bool))
     if np.count_nonzero(ok) < 2:
         return math.nan, False
     first = int(np.flatnonzero(ok)[np.argmin(amps[ok])])
@@ -212,7 +254,12 @@ def linear_reference(
     above = ok & ~at_noise_floor
     first_above = float(np.min(amps[above])) if above.any() else math.inf
     below = ok & at_noise_floor & (amps < first_above) & np.isfinite(bound)
-    return float(np.min(bound[below])), True
+    tightest = float(np.min(bound[below])) if below.any() else math.inf
+    if above.any():
+        t_first = float(t[above][np.argmin(amps[above])])
+        if t_first <= tightest:  # the first resolved point is within the bounds: linear
+            return t_first, False
+    return tightest if math.isfinite(tightest) else math.nan, math.isfinite(tightest)
 
 
 def transmission_gain(

@@ -130,7 +130,7 @@ def plot_compare_spectra(dc: DirectionComparison) -> Figure:
             if a // cols == rows - 1:
                 ax.set_xlabel("frequency (kHz)")
             if a % cols == 0:
-                ax.set_ylabel(f"|V| #{ms.far} (um)")
+                ax.set_ylabel(f"#{ms.far} velocity spectrum |V(f)| (µm)")
         axs[0, 0].legend(fontsize=8)
         fig.suptitle(f"{dc.direction.upper()}: far cylinder #{ms.far}, measured and model")
     return fig

@@ -4,12 +4,14 @@ directions, with the linear floor, and the converted far-end peak frequency.
 Top: ``sqrt(E_far / E_entry)`` (the far/near rms ratio, dimensionless) per amplitude, log-log;
 the dashed line of each direction is its linear floor, the ratio at the smallest amplitude (a
 linear chain passes the same fraction at every amplitude, so what rises above the floor is
-what the nonlinearity lets through). A point whose far end held no more than its noise is drawn
-as a downward triangle at the ratio's upper bound; when the smallest amplitude is one, the floor
-is the tightest such bound, drawn "at most", and the gains are lower bounds
-(:mod:`analysis.sweep`). Bottom: the far cylinder's output peak (kHz) per
-amplitude, with the input frequency (dashed) and the far cylinder's band edge that the
-conversion heads for (dotted).
+what the nonlinearity lets through). Where the records show their noise (a pre-trigger), the
+ratio is the far end's signal's: its energy in the band where the signal can be, less the
+noise's there (:mod:`analysis.noise_floor`). A point whose far end held no more than its
+noise is drawn as a downward triangle at the ratio's upper bound; when the smallest amplitude
+is one, the floor is the tightest such bound, drawn "at most", and the gains are lower bounds
+(unless the first point above the noise passes less: :mod:`analysis.sweep`). Bottom: the far
+cylinder's output peak (kHz) per amplitude, with the input frequency (dashed) and the far
+cylinder's band edge that the conversion heads for (dotted).
 """
 
 from __future__ import annotations
@@ -30,8 +32,11 @@ MARKERS = {"ltr": "o-", "rtl": "s-"}
 
 
 def rms_ratio(sweep: AmplitudeSweep) -> np.ndarray:
-    """Far/near rms ratio ``[A]`` of a sweep: ``sqrt(E_far / E_entry)`` (NaN where unmeasured)."""
-    return np.sqrt(np.asarray(sweep.transmission, dtype=np.float64))
+    """Far/near rms ratio ``[A]`` of a sweep: ``sqrt(E_far / E_entry)`` (NaN where unmeasured),
+    of the far end's signal where its noise is known (``signal_transmission``: its energy in
+    the signal band less the noise's), the quantity the linear floor and the bounds are of."""
+    with np.errstate(invalid="ignore"):
+        return np.sqrt(np.asarray(sweep.signal_transmission, dtype=np.float64))
 
 
 def plot_regime(sweeps: Mapping[str, AmplitudeSweep]) -> Figure:
@@ -46,7 +51,8 @@ def plot_regime(sweeps: Mapping[str, AmplitudeSweep]) -> Figure:
             colour = DIRECTION_COLOURS.get(d, "k")
             amps = sw.amplitudes / factor
             r = rms_ratio(sw)
-            measured = np.isfinite(r) & (amps > 0)
+            # measured: the whole records' ratio (a noise-only far record's signal can be < 0)
+            measured = np.isfinite(sw.transmission) & (amps > 0)
             noisy = measured & sw.at_noise_floor
             ok = measured & ~noisy
             missing = f"{d.upper()} failed or not measured"

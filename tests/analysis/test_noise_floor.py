@@ -61,7 +61,8 @@ def test_the_linear_reference_is_the_tightest_bound_below_the_first_resolved_poi
     t = np.array([0.1, 0.02, 0.03, 0.5])
     floor = np.array([True, True, False, False])
     bound = np.array([0.4, 0.08, np.nan, np.nan])
-    assert linear_reference(amps, t, floor, bound) == (0.08, True)
+    assert linear_reference(amps, t, floor, bound) == (0.03, False)  # within the bounds
+    assert linear_reference(amps, t * [1, 1, 3, 1], floor, bound) == (0.08, True)
     assert linear_reference(amps, t, np.zeros(4, bool), bound) == (0.1, False)
     assert np.isnan(linear_reference(amps[:1], t[:1], floor[:1], bound[:1])[0])
 
@@ -71,21 +72,32 @@ def test_points_at_the_noise_floor_are_bounds_and_the_conversion_still_shows(
 ) -> None:
     summary = summarize(read_run(small_sweep))
     rows = {(r["direction"], round(r["amplitude"] * 1e9)): r for r in summary["rows"]}
+    for d, nm in (("ltr", 10), ("rtl", 10), ("rtl", 143)):
+        row = rows[(d, nm)]
+        assert row["at_noise_floor"] and row["conversion"] == "none", row
+        assert row["output_Hz"] is None and row["transmission_gain"] is None
+        assert row["far_noise_ratio"] < RESOLVED_FACTOR
+        # a bound on the far end's energy within the band where the signal can be (the
+        # whole record's E_far/E_in holds the broadband noise too)
+        assert 0 < row["transmission_upper_bound"] < row["transmission"]
     for d in ("ltr", "rtl"):
-        for nm in (10, 143):
-            row = rows[(d, nm)]
-            assert row["at_noise_floor"] and row["conversion"] == "none", row
-            assert row["output_Hz"] is None and row["transmission_gain"] is None
-            assert row["far_noise_ratio"] < RESOLVED_FACTOR
-            assert row["transmission_upper_bound"] >= row["transmission"]
         high = rows[(d, 5000)]
         assert not high["at_noise_floor"] and high["far_noise_ratio"] > 100
-        assert high["gain_is_lower_bound"] and high["transmission_gain"] >= 10
+        assert high["transmission_gain"] >= 10
+    # LTR's linear leak at 143 nm stands above the noise in its band (a line near 8.2 kHz,
+    # below the 10 nm bound): it is the linear reference itself, and nothing converted
+    lin = rows[("ltr", 143)]
+    assert not lin["at_noise_floor"] and lin["far_noise_ratio"] > 10 * RESOLVED_FACTOR
+    assert lin["transmission_gain"] == pytest.approx(1.0) and lin["conversion"] == "none"
+    assert not rows[("ltr", 5000)]["gain_is_lower_bound"]
+    assert rows[("rtl", 5000)]["gain_is_lower_bound"]
     # the paper's claim: converted down from the left, up from the right
     assert rows[("ltr", 5000)]["conversion"] == "down"
     assert rows[("rtl", 5000)]["conversion"] == "up"
     text = format_summary(summary)
-    assert "<x: the far end held less than 4x the energy" in text and ">=" in text
+    assert "<x: the far end held less than 4x the energy its own pre-trigger noise gives" in text
+    assert "within the band where the signal can be (ltr 6.69-10.26 kHz" in text
+    assert ">=" in text
 
 
 def test_the_input_frequency_is_the_median_of_the_drive_records() -> None:
@@ -219,3 +231,52 @@ def test_a_sweep_without_its_entry_cylinder_leaves_the_regime_figure_out(tmp_pat
     assert biafc(["figures", str(out), "--out", str(tmp_path / "f")]) == 0
     summary = json.loads((tmp_path / "f" / "summary.json").read_text())
     assert "entry cylinder was not measured" in summary["figures_left_out"]["regime"]
+
+
+def test_a_narrowband_far_line_is_set_against_the_noise_in_its_own_band(
+    small_sweep: Path,
+) -> None:
+    """A second reader: on the simulated bench, linear_lowamp's LTR far end (a line near
+    8.2 kHz standing about 10x above the noise in its band) read "E_far/E_in < 0.00307": the
+    energies were compared over the whole 0..250 kHz record, where broadband digitiser noise
+    hides a narrowband line. A far record whose burst-band line holds 1.5x the whole record's
+    noise energy stands far above the noise within the band where the signal can be."""
+    run = read_run(small_sweep)
+    scan = run.scans["ltr"]
+    far = int(np.flatnonzero(scan.cylinders == 31)[0])
+    t = scan.time_s
+    rate = scan.sample_rate_Hz
+    rng = np.random.default_rng(7)
+    noise = 1e-6 * rng.standard_normal(t.size)
+    line = np.exp(-(((t - 8e-3) / 0.5e-3) ** 2) / 2) * np.sin(2 * np.pi * 8200.0 * t)
+    e_noise = np.sum(noise**2) / rate
+    line *= np.sqrt(1.5 * e_noise / (np.sum(line**2) / rate))
+    scan.velocity[0, far, :] = (noise + line).astype(np.float32)
+    sweep = amplitude_sweep(scan, run.chain)
+    assert not sweep.at_noise_floor[0], sweep.far_noise_ratio[0]
+    assert sweep.far_noise_ratio[0] > 10 * RESOLVED_FACTOR
+    assert sweep.output_Hz[0] == pytest.approx(8200.0, abs=150.0)
+    # noise alone stays at the noise floor, bounded in its band (not over the whole record)
+    scan.velocity[0, far, :] = noise.astype(np.float32)
+    quiet = amplitude_sweep(scan, run.chain)
+    assert quiet.at_noise_floor[0] and np.isnan(quiet.output_Hz[0])
+    lo, hi = quiet.signal_band_Hz
+    assert lo < 8200.0 < hi and 8920.0 < hi and hi - lo < 0.02 * rate / 2
+    e_entry = np.sum(scan.velocity[0, 0, :].astype(float) ** 2) / rate
+    assert quiet.transmission_bound[0] < 0.1 * RESOLVED_FACTOR * e_noise / e_entry
+
+
+def test_band_noise_energy_is_the_pre_trigger_noise_in_the_band() -> None:
+    """White noise: the band's share of the whole record's noise energy, from the pre-trigger
+    samples measured over a wider level band."""
+    from analysis.noise_floor import band_energy, band_noise_energy
+
+    rng = np.random.default_rng(3)
+    rate = 100e3
+    t = (np.arange(5000) - 500) / rate
+    x = rng.standard_normal((64, t.size))
+    whole = noise_energy(x, t, rate)
+    band = band_noise_energy(x, t, rate, (8e3, 12e3), (4e3, 16e3))
+    assert np.mean(band / whole) == pytest.approx(4e3 / 50e3, rel=0.1)
+    assert np.mean(band_energy(x, rate, (8e3, 12e3)) / band) == pytest.approx(1.0, rel=0.1)
+    assert np.all(np.isnan(band_noise_energy(x[:, 490:], t[490:], rate, (8e3, 12e3))))
