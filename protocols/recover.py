@@ -25,7 +25,13 @@ import struct
 from pathlib import Path
 from typing import Any
 
-__all__ = ["ClearedView", "clear_consistency_flags", "has_consistency_flags", "lookup3"]
+__all__ = [
+    "ClearedView",
+    "clear_consistency_flags",
+    "has_consistency_flags",
+    "has_stale_end",
+    "lookup3",
+]
 
 _SIGNATURE = b"\x89HDF\r\n\x1a\n"
 _M = 0xFFFFFFFF
@@ -86,7 +92,9 @@ def lookup3(data: bytes, initval: int = 0) -> int:
 
 def clear_consistency_flags(path: str | Path) -> bool:
     """Clear the SWMR-write flags of ``path`` and raise a stale end-of-file address to the
-    file's size; True when something was cleared.
+    file's size; True when something was changed. The address is raised whether or not the
+    flags are still set: ``h5clear -s`` (which HDF5's own error message suggests) and this
+    software before 2026-11-28 cleared the flags and left it stale.
 
     Only a superblock of version 2 or later at offset 0 is handled (what ``libver="latest"``
     writes); anything else is left alone (returns False).
@@ -102,28 +110,44 @@ def clear_consistency_flags(path: str | Path) -> bool:
     return True
 
 
+def _layout(head: bytes) -> tuple[int, str] | None:
+    """``(checksum offset, struct format of an address)`` of a version 2+ superblock at the
+    start of ``head`` whose checksum holds, or None (not a layout we know: never written)."""
+    if len(head) < 12 or head[:8] != _SIGNATURE or head[8] < 2 or head[9] not in (2, 4, 8):
+        return None
+    n = 12 + 4 * head[9]
+    if len(head) < n + 4:
+        return None
+    (stored,) = struct.unpack_from("<I", head, n)
+    if lookup3(bytes(head[:n])) != stored:
+        return None
+    return n, {2: "<H", 4: "<I", 8: "<Q"}[head[9]]
+
+
+def _end_address(head: bytes, fmt: str) -> int:
+    """The superblock's end-of-file address (fields: base address, superblock extension
+    address, end-of-file address, root group address, each ``fmt``)."""
+    return int(struct.unpack_from(fmt, head, 12 + 2 * struct.calcsize(fmt))[0])
+
+
 def _cleared_superblock(head: bytes, file_size: int) -> bytes | None:
     """The superblock at the start of ``head`` with its consistency flags cleared, its EOA at
     least ``file_size`` (bytes) and its checksum rewritten, or ``None`` when there is nothing
-    to clear (or not a layout we know: then nothing is ever written into it)."""
-    if len(head) < 12 or head[:8] != _SIGNATURE or head[8] < 2 or head[9] not in (2, 4, 8):
+    to change (or not a layout we know: then nothing is ever written into it). Only a
+    superblock at offset 0 is read here, so its base address is 0 and the EOA compares with
+    the file's size as it is. An EOA above the size (a file cut short) is left: that file is
+    not whole (:mod:`protocols.hdf5probe` refuses it)."""
+    layout = _layout(head)
+    if layout is None:
         return None
-    size_offsets = head[9]
-    n = 12 + 4 * size_offsets
-    if len(head) < n + 4:
-        return None
+    n, fmt = layout
     block = bytearray(head[: n + 4])
-    (stored,) = struct.unpack_from("<I", block, n)
-    if lookup3(bytes(block[:n])) != stored or block[11] == 0:
+    stale = _end_address(head, fmt) < file_size  # bytes a killed writer flushed past it
+    if block[11] == 0 and not stale:
         return None
     block[11] = 0
-    # base address, superblock extension address, end-of-file address, root group address
-    fmt = {2: "<H", 4: "<I", 8: "<Q"}[size_offsets]
-    (base,) = struct.unpack_from(fmt, block, 12)
-    at = 12 + 2 * size_offsets
-    (eoa,) = struct.unpack_from(fmt, block, at)
-    if base + eoa < file_size:  # bytes a killed writer flushed past the recorded end
-        struct.pack_into(fmt, block, at, file_size - base)
+    if stale:
+        struct.pack_into(fmt, block, 12 + 2 * struct.calcsize(fmt), file_size)
     struct.pack_into("<I", block, n, lookup3(bytes(block[:n])))
     return bytes(block)
 
@@ -131,7 +155,19 @@ def _cleared_superblock(head: bytes, file_size: int) -> bytes | None:
 def has_consistency_flags(path: str | Path) -> bool:
     """Whether ``path`` carries the "open for write" flags of a writer that never closed it."""
     with Path(path).open("rb") as f:
-        return _cleared_superblock(f.read(64), 0) is not None
+        head = f.read(64)
+    return _layout(head) is not None and head[11] != 0
+
+
+def has_stale_end(path: str | Path) -> bool:
+    """Whether ``path``'s superblock names an end-of-file address below the file's size: bytes
+    a killed writer flushed past it, which HDF5 refuses to read and a writer would allocate
+    over (:func:`clear_consistency_flags` raises it)."""
+    with Path(path).open("rb") as f:
+        head = f.read(64)
+        size = os.fstat(f.fileno()).st_size
+    layout = _layout(head)
+    return layout is not None and _end_address(head, layout[1]) < size
 
 
 class ClearedView(io.RawIOBase):

@@ -722,8 +722,13 @@ def open_for_reading(path: str | Path) -> Iterator[h5py.File]:
         header = probe_hdf5(path)
     except HDF5ProbeError as exc:
         raise RunFileError(str(exc)) from None
-    if header.flags == 0:
+    stale = header.end is not None and header.end < header.size
+    if header.flags == 0 and not stale:
         with h5py.File(path, "r", locking=False) as g:
+            yield g
+        return
+    if header.flags == 0:  # flags cleared (h5clear -s) over bytes a killed writer flushed
+        with ClearedView(path) as raw, h5py.File(raw, "r") as g:
             yield g
         return
     try:

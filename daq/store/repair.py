@@ -26,7 +26,7 @@ from daq.store.lock import RunFileLock
 from daq.store.process_check import process_alive
 from daq.store.run_store import StoreError
 from protocols.outputfile import read_output
-from protocols.recover import clear_consistency_flags, has_consistency_flags
+from protocols.recover import clear_consistency_flags, has_consistency_flags, has_stale_end
 from protocols.runfile import (
     DamagedRecordsError,
     PointState,
@@ -137,9 +137,7 @@ def repair_run(path: str | Path) -> RepairReport:
             return _repair_study(path, data, actions, status_first)
         before_counts = _run_counts(data)
         status_before = status_first or data.status
-        if has_consistency_flags(path):
-            if clear_consistency_flags(path):
-                actions.append("cleared the open-for-write flags of a killed writer")
+        _clear_superblock(path, actions)
         status_after = data.status
         if data.status == "running":
             try:
@@ -203,12 +201,25 @@ def _read(path: Path) -> RunData | StudyData:
         raise StoreError(f"{path} is not a readable biafc run file ({exc})") from None
 
 
+def _clear_superblock(path: Path, actions: list[str]) -> None:
+    """Clear a killed writer's flags and raise a stale end-of-file address (each said in
+    ``actions``): bytes flushed past it are otherwise unreadable, and a writer allocates over
+    them."""
+    flags, stale = has_consistency_flags(path), has_stale_end(path)
+    if (flags or stale) and clear_consistency_flags(path):
+        if flags:
+            actions.append("cleared the open-for-write flags of a killed writer")
+        if stale:
+            actions.append(
+                "raised the file's end address over the bytes a killed writer flushed past it"
+            )
+
+
 def _clear_damaged(path: Path, actions: list[str], clear: Callable[[Path], str | None]) -> str:
     """Clear what ``clear`` finds damaged on disk in ``path`` (run records or study cells),
     after a killed writer's flags (each noted in ``actions``). Returns the file's status
     before."""
-    if has_consistency_flags(path) and clear_consistency_flags(path):
-        actions.append("cleared the open-for-write flags of a killed writer")
+    _clear_superblock(path, actions)
     with h5py.File(path, "r") as f:
         status = str(f.attrs.get("status", ""))
     line = clear(path)
@@ -241,8 +252,7 @@ def _repair_study(
     before_counts = _study_counts(data)
     status_now = str(data.attrs.get("status", ""))
     status_before = status_first or status_now
-    if has_consistency_flags(path) and clear_consistency_flags(path):
-        actions.append("cleared the open-for-write flags of a killed writer")
+    _clear_superblock(path, actions)
     status_after = status_now
     if status_now == "running":
         try:

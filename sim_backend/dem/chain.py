@@ -13,7 +13,7 @@ from sim_backend.dem.contact import hertz_beta, linear_stiffness, static_overlap
 from sim_backend.dem.material import Material
 from sim_backend.dem.spec import ChainSpec
 
-__all__ = ["Chain", "build_chain"]
+__all__ = ["Chain", "build_chain", "contact_beta", "crossing_time_upper_s"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -103,6 +103,30 @@ class Chain:
 _CACHE: dict[str, Chain] = {}
 
 
+def contact_beta(spec: ChainSpec) -> float:
+    """The chain's Hertz constant beta_c (N/m^1.5): the crossed cylinders' own, times the
+    spec's ``contact_stiffness_factor``."""
+    beta = hertz_beta(spec.diameter, spec.material.to_material(), spec.crossing_angle)
+    if spec.contact_stiffness_factor != 1.0:
+        beta *= spec.contact_stiffness_factor
+    return beta
+
+
+def crossing_time_upper_s(spec: ChainSpec) -> float:
+    """An upper bound (s) of the chain's fastest contact crossing ``sqrt(min m0 / K)`` without
+    its modes: the lightest cylinder's whole mass (its rigid part ``m0`` is lighter) over the
+    linearised contact stiffness. Inf at a preload of 0 N (no linear wave)."""
+    material = spec.material.to_material()
+    factors = spec.density_factors or {}
+    area = 0.25 * np.pi * spec.diameter**2
+    lightest = min(
+        material.density_kg_per_m3 * factors.get(i + 1, 1.0) * area * float(length)
+        for i, length in enumerate(spec.lengths_m())
+    )
+    k = linear_stiffness(spec.preload, contact_beta(spec))
+    return float(np.sqrt(lightest / k)) if k > 0 else float("inf")
+
+
 def build_chain(spec: ChainSpec) -> Chain:
     """Build (and cache, keyed by the spec's content) the discrete-element chain of ``spec``."""
     key = spec.model_dump_json()
@@ -135,9 +159,7 @@ def build_chain(spec: ChainSpec) -> Chain:
         m0[i] = modes.residual_mass_kg
         mres[i] = modes.modal_mass_kg
         omega[i] = modes.omega_rad_s
-    beta = hertz_beta(spec.diameter, material, spec.crossing_angle)
-    if spec.contact_stiffness_factor != 1.0:
-        beta *= spec.contact_stiffness_factor
+    beta = contact_beta(spec)
     delta0 = static_overlap(spec.preload, beta)
     rest = np.full(n + 1, delta0)
     for k, g in (spec.contact_gaps or {}).items():

@@ -70,3 +70,37 @@ def test_a_read_only_view_of_the_killed_file_reads_every_flushed_record(tmp_path
     for i in range(4):
         assert np.array_equal(v[i], np.arange(1000) + i), i
     assert path.read_bytes() == before  # reading changes nothing
+
+
+def _h5clear_s(path: Path) -> None:
+    """What ``h5clear -s`` (and this software before 2026-11-28) did: the flags byte zeroed
+    and the checksum rewritten, the end-of-file address left as it was."""
+    from protocols.recover import lookup3
+
+    block = bytearray(path.read_bytes()[:48])
+    block[11] = 0
+    struct.pack_into("<I", block, 44, lookup3(bytes(block[:44])))
+    with path.open("r+b") as f:
+        f.write(block)
+
+
+def test_a_stale_end_address_is_raised_after_the_flags_were_cleared_elsewhere(
+    tmp_path: Path,
+) -> None:
+    """A reviewer: the address was raised only while the flags were still set, so a file whose
+    flags h5clear -s (as HDF5's own message suggests) or an older repair had cleared kept its
+    stale address, and a resume then wrote over the flushed records."""
+    from protocols.recover import has_stale_end
+    from protocols.runfile import open_for_reading
+
+    path = _killed(tmp_path / "k.h5")
+    _h5clear_s(path)
+    assert not has_consistency_flags(path) and has_stale_end(path)
+    with open_for_reading(path) as f:  # readers see every flushed record, changing nothing
+        assert np.array_equal(f["v"][3], np.arange(1000) + 3)
+    assert clear_consistency_flags(path) and not has_stale_end(path)
+    with h5py.File(path, "r+", libver="latest") as f:
+        f.create_dataset("more", data=np.full((4, 2000), 7.0))
+    with h5py.File(path, "r") as f:
+        for i in range(4):
+            assert np.array_equal(f["v"][i], np.arange(1000) + i), i
