@@ -46,7 +46,7 @@ from analysis.bands import asymmetry_factor, expected_output_Hz, peak_search_ran
 from analysis.spectra import amplitude_spectrum, peak_frequency
 from protocols.study import PARAMETERS, CellTable, Study
 from protocols.studyfile import STATUS_FAILED, STATUS_INACCURATE, STATUS_OK
-from sim_backend.dem.versions import model_version
+from sim_backend.dem import versions
 
 __all__ = [
     "NO_ESTIMATE",
@@ -520,5 +520,5 @@ def run_task(
         spectra=spectra,
         wall_s=time.perf_counter() - t0,
         worker=f"{socket.gethostname()}:{os.getpid()}",
-        model_version=model_version(),
+        model_version=versions.model_version(),
     )

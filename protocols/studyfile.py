@@ -6,7 +6,8 @@ Layout (``format = "biafc-study"``, ``format_version = 1`` on the root)::
                           of what decides the results, with the base chain), chain_yaml,
                           n_cells, amplitude_kind, directions, status (running | complete |
                           incomplete | failed), created_utc, software, model_version (the DEM
-                          kernel's and the modes' versions that ran the cells)
+                          kernel's and the modes' versions that ran the cells), model_changes_json
+                          (continues accepted with --accept-model-change: from, to, cells_done)
     /parameters/<name>    [n_cells] float64, SI (attr unit); amplitude last
     /cells/point          [n_cells] int64: the design point of each cell
     /cells/status         [n_cells] int8: 0 not run, 1 ok, 2 inaccurate (above max_error),
@@ -221,11 +222,15 @@ class StudyStore:
         n_tasks: int | None = None,
         cells_per_task: int | None = None,
         model_version: str | None = None,
+        accept_model_change: bool = False,
     ) -> StudyStore:
         """Open an output to continue it; refused (:class:`StudyFileError`) when it is not a
         study output, was made from another study (digest), holds other cells or (when
         ``model_version`` is given) was run by another model version, or by a version of this
-        software that did not record it: its cells would mix with this run's. The caller holds
+        software that did not record it: its cells would mix with this run's (unless every
+        cell is done: nothing would be added; or ``accept_model_change``: the change is
+        recorded in ``model_changes_json`` and the output's ``model_version`` becomes this
+        one). The caller holds
         the file's lock; the open-for-write flags a killed writer left are cleared first.
         ``n_tasks``, ``cells_per_task``: this run's grouping; when the output's ``/tasks`` counts
         in another (``run.cells_per_task`` edited between runs: the digest leaves ``run``
@@ -248,8 +253,6 @@ class StudyStore:
                     f"{p}: made from another study (digest {old[:12]}, this one {digest[:12]}); "
                     "choose another --out"
                 )
-            if model_version is not None:
-                _same_model(p, f, model_version)
             same = int(f.attrs["n_cells"]) == table.n_cells and all(
                 name in f["parameters"]
                 and np.array_equal(f["parameters"][name][...], table.values[:, i])
@@ -259,6 +262,8 @@ class StudyStore:
                 raise StudyFileError(
                     f"{p}: holds other cells than this study's; choose another --out"
                 )
+            if model_version is not None and not np.all(f["cells/status"][...] != 0):
+                _same_model(p, f, model_version, accept_model_change)  # last: it may write
             if n_tasks is not None:
                 _regroup_tasks(f, n_tasks, cells_per_task)
         except BaseException:
@@ -363,19 +368,36 @@ def _regroup_tasks(f: h5py.File, n_tasks: int, cells_per_task: int | None) -> No
     _create_tasks(f, n_tasks, cells_per_task)
 
 
-def _same_model(p: Path, f: h5py.File, model_version: str) -> None:
-    """Refuse to continue an output whose cells another model version ran."""
-    old = f.attrs.get("model_version")
-    if not old:
-        raise StudyFileError(
-            f"{p}: made before studies recorded their model version, so its cells may come "
-            f"from another DEM kernel than this one ({model_version}); choose another --out"
-        )
-    if str(old) != model_version:
+def _same_model(p: Path, f: h5py.File, model_version: str, accept: bool) -> None:
+    """Refuse to continue an output whose cells another model version ran, or record the
+    change (``accept``: ``--accept-model-change``)."""
+    old = str(f.attrs.get("model_version", "") or "")
+    if old == model_version:
+        return
+    if not accept:
+        if not old:
+            raise StudyFileError(
+                f"{p}: made before study outputs recorded their model version, so its cells may "
+                f"come from another DEM kernel than this one ({model_version}); give "
+                "--accept-model-change to continue it, recording the change, or choose another "
+                "--out"
+            )
         raise StudyFileError(
             f"{p}: its cells were run by another model ({old}); this software runs "
-            f"{model_version}, and the two would mix; choose another --out"
+            f"{model_version}, and the two would mix; give --accept-model-change to continue "
+            "it, recording the change, or choose another --out"
         )
+    changes = json.loads(str(f.attrs.get("model_changes_json", "[]")))
+    changes.append(
+        {
+            "from": old or "not recorded",
+            "to": model_version,
+            "cells_done": int(np.count_nonzero(f["cells/status"][...] != 0)),
+            "at_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        }
+    )
+    f.attrs["model_changes_json"] = json.dumps(changes)
+    f.attrs["model_version"] = model_version
 
 
 def _software() -> str:

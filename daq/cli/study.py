@@ -43,6 +43,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--scheduler", default=None, help="address of a running Dask scheduler (tcp://host:8786)"
     )
+    parser.add_argument(
+        "--accept-model-change",
+        action="store_true",
+        help="continue an output whose cells another DEM model version ran (or one that did "
+        "not record it), recording the change in the output",
+    )
     parser.add_argument("--dry-run", action="store_true", help="check and count, run nothing")
     parser.add_argument("-q", "--quiet", action="store_true", help="no progress display")
 
@@ -137,6 +143,7 @@ def _run_to(
                 store = StudyStore.open(
                     out, digest=digest, table=table, n_tasks=len(tasks),
                     cells_per_task=study.run.cells_per_task, model_version=model_version(),
+                    accept_model_change=args.accept_model_change,
                 )  # fmt: skip
             else:
                 grid = spectrum_grid_Hz(study) if study.record_spectra else None
@@ -187,7 +194,7 @@ def _run(args: argparse.Namespace, setup: Any, table: Any, store: Any, client: A
     from daq.cli.stop_signals import raise_if_stopped
     from daq.progress import ProgressDisplay
     from daq.store.disk_space import DiskFull
-    from daq.study_runner import dask_client, n_workers, no_worker_notice, run_study
+    from daq.study_runner import MixedModel, dask_client, n_workers, no_worker_notice, run_study
     from protocols.left_open import exit_leaving_them
     from protocols.studyfile import StudyFileError
 
@@ -256,6 +263,12 @@ def _run(args: argparse.Namespace, setup: Any, table: Any, store: Any, client: A
         first = str(error).splitlines()[0] if str(error) else ""
         if isinstance(error, DiskFull):
             print(f"biafc study: failed: {first}", file=sys.stderr)
+        elif isinstance(error, MixedModel):  # the same cluster would fail the same way
+            print(
+                f"biafc study: failed: {store.path}: {first}; install this biafc-lab on every "
+                "worker, then run again to continue",
+                file=sys.stderr,
+            )
         else:
             print(f"biafc study: failed: {type(error).__name__}: {first}", file=sys.stderr)
             print("the output keeps every finished task; run again to continue", file=sys.stderr)
