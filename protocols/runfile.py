@@ -60,7 +60,9 @@ and nowhere else. Layout (see the design notes)::
                       bench dem_runs_json: a JSON list with one entry per DEM run (direction,
                       kind, amplitude and its units, the same indicators). ``biafc simulate``
                       writes them at creation; the run engine when the file closes (a
-                      resume: the earlier sessions' runs, then its own, the worst over all).
+                      resume: the earlier sessions' runs, then its own, the worst over all;
+                      a killed session's runs were never written, and dem_runs_note then
+                      says how many (direction, amplitude) pairs have none listed).
 
 Fields added after the first files (files before 2026-11-28 lack them, and readers take them
 as empty, NaN or no rows): ``fail_reason``, ``sensitivity_m_per_s_per_V``,

@@ -520,7 +520,18 @@ class RunEngine:
         err = [float(r.get("error_estimate_rel", np.nan)) for r in runs]
         res = [float(r.get("work_not_in_chain_rel", np.nan)) for r in runs]
         finite = [x for x in res if np.isfinite(x)]
+        missing = self._amplitudes_without_dem_run(runs)
+        note = (
+            {
+                "dem_runs_note": f"{missing} (direction, amplitude) pair(s) with measured points "
+                "have no DEM run listed: a session ended without closing the file (killed), so "
+                "their error estimates are not in error_estimate_rel"
+            }
+            if missing
+            else {}
+        )
         return {
+            **note,
             "integrator": str(runs[0].get("integrator", "")),
             "order": int(runs[0].get("order", 0)),
             "dt_s": float(runs[0].get("dt_s", np.nan)),
@@ -529,6 +540,22 @@ class RunEngine:
             "dem_runs": len(runs),
             "dem_runs_json": json.dumps(runs, default=float),
         }
+
+    def _amplitudes_without_dem_run(self, runs: list[dict[str, Any]]) -> int:
+        """How many (direction, amplitude) pairs of the file have measured points but no DEM
+        run listed (one run serves every cylinder of a pair): those of a killed session, whose
+        runs were never written (``/simulation`` is written as the file closes)."""
+        if self._writer is None:
+            return 0
+        try:
+            measured = sum(
+                int(np.any(self._writer.done_mask(d) == PointState.DONE, axis=1).sum())
+                for d in self.plan.directions
+            )
+        except (OSError, KeyError, ValueError):
+            return 0
+        listed = len({(str(r.get("direction")), float(r.get("amplitude", np.nan))) for r in runs})
+        return max(0, measured - listed)
 
     def _snapshot(self) -> dict[str, Any]:
         """Every instrument's ``snapshot()``, what each reports when asked now (``read_back``:

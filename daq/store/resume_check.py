@@ -137,5 +137,9 @@ def model_differences(
     then = stored_model.get("model_version")
     if then == now:
         return []
-    said = repr(then) if then else "not recorded"
-    return [f"simulated bench model: {said} in {source}, {now!r} now"]
+    if not then:
+        return [
+            f"simulated bench model: not recorded in {source} (made before run files recorded "
+            f"it), {now!r} now"
+        ]
+    return [f"simulated bench model: {then!r} in {source}, {now!r} now"]

@@ -211,6 +211,9 @@ def _stored_chain_spec(snapshot_json: Any) -> dict[str, Any] | None:
     return spec if isinstance(spec, dict) else None
 
 
+_MODEL = "simulated bench model: "
+
+
 def _stored_model(snapshot_json: Any) -> dict[str, Any] | None:
     """The simulated bench's model as a run recorded it (``/snapshot``'s
     ``simulation_model``), or None (a lab bench's run)."""
@@ -283,6 +286,12 @@ def check_resume(
         diffs = bench_differences(text["bench_yaml"], bench, str(path))
         diffs += chain_differences(_stored_chain_spec(snapshot_json), bench, str(path))
         diffs += model_differences(_stored_model(snapshot_json), bench, str(path))
+        if diffs and not accept_bench_change and all(d.startswith(_MODEL) for d in diffs):
+            raise StoreError(  # the same bench: only this software's model changed
+                f"--resume: {path} was measured with another simulated-bench model "
+                f"({'; '.join(diffs)}); give --accept-bench-change to continue it with this "
+                "one, recording the change in the file"
+            )
         if diffs and not accept_bench_change:
             raise StoreError(
                 f"--resume: {path} was started on another bench ({len(diffs)} difference(s): "

@@ -254,3 +254,25 @@ def test_a_kill_between_a_points_records_and_its_done_mark_loses_no_point(
         np.testing.assert_array_equal(scan.velocity, b.scans[d].velocity)
     assert _plain_h5py_opens(killed)
     assert biafc(["repair", str(killed)]) == 0
+
+
+def test_a_killed_sessions_missing_dem_runs_are_said_in_the_file(proto_file, tmp_path) -> None:
+    """A reviewer: /simulation is written as the file closes, so a killed session's DEM runs
+    are never recorded; after the resume the file listed the resume's runs as if they were
+    all, its worst error estimate missing the killed session's. Now it says how many are
+    missing."""
+    hook = tmp_path / "hook"
+    hook.mkdir()
+    (hook / "sitecustomize.py").write_text(_KILL_HOOK)
+    killed = tmp_path / "killed.h5"
+    env = dict(os.environ, KILL_AFTER_RECORDS="5", PYTHONPATH=f"{hook}{os.pathsep}{ROOT}")
+    proc = subprocess.run(
+        [sys.executable, "-m", "daq.cli.run_protocol", str(proto_file), "--out", str(killed),
+         "--seed", "5", "-q"],
+        env=env, cwd=ROOT, capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert proc.returncode == -9, proc.stderr
+    assert rp.main(["--resume", str(killed), "-q"]) == 0
+    sim = read_run(killed).simulation
+    assert sim["dem_runs"] == 3  # ltr at 2 Vpp, rtl at 1 and 2 Vpp: this session's
+    assert sim["dem_runs_note"].startswith("1 (direction, amplitude) pair(s) with measured")

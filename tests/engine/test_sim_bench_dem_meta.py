@@ -102,7 +102,31 @@ def test_a_resume_by_another_model_version_is_a_bench_difference(
     assert rp.main(["--resume", str(out), "--quiet"]) == 2
     err = capsys.readouterr().err
     assert "simulated bench model: " in err and "'kernel 9: another; modes 2' now" in err, err
+    assert (
+        "was measured with another simulated-bench model" in err and "on another bench" not in err
+    )
     assert read_run(out).status == "aborted"  # refused: not touched
     assert rp.main(["--resume", str(out), "--quiet", "--accept-bench-change"]) == 0
     overrides = json.loads(read_run(out).attrs["bench_overrides_json"])
     assert any("simulated bench model" in d for d in overrides[-1]["differences"])
+
+
+def test_an_old_simulated_run_file_says_why_it_needs_accept_bench_change(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A reviewer: a file made before the model version was recorded was refused as "started
+    on another bench ... resume on the same bench", which the user (on the same bench) could
+    not act on."""
+    import h5py
+
+    out = tmp_path / "run.h5"
+    _aborted_after_the_first_amplitude(out)
+    with h5py.File(out, "r+") as f:
+        snap = json.loads(f["snapshot"].attrs["json"])
+        del snap["simulation_model"]["model_version"]
+        f["snapshot"].attrs["json"] = json.dumps(snap)
+    assert rp.main(["--resume", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "not recorded in" in err and "made before run files recorded it" in err, err
+    assert "give --accept-bench-change to continue it with this one" in err
+    assert "resume on the same bench" not in err
