@@ -102,6 +102,11 @@ def canonical(address: str) -> str:
     return a.upper()
 
 
+#: seconds a LAN instrument's host name may take to resolve for its lock (then the name is
+#: the lock's key, as for a name that does not resolve)
+LOOKUP_TIMEOUT_S = 2.0
+
+
 def _host_address(host: str) -> str:
     """A LAN instrument's IPv4 address (the lowest, where a name has several), so that its
     name and its address are one lock; the name upper-cased where it does not resolve (the
@@ -110,12 +115,23 @@ def _host_address(host: str) -> str:
         return str(ipaddress.ip_address(host))
     except ValueError:
         pass
-    try:
-        found = socket.getaddrinfo(host, None, family=socket.AF_INET, type=socket.SOCK_STREAM)
-    except (OSError, UnicodeError):
-        return host.upper()
-    addresses = sorted({str(info[4][0]) for info in found}, key=ipaddress.ip_address)
-    return addresses[0] if addresses else host.upper()
+    found: list[Any] = []
+
+    def look_up() -> None:
+        try:
+            found.extend(
+                socket.getaddrinfo(host, None, family=socket.AF_INET, type=socket.SOCK_STREAM)
+            )
+        except (OSError, UnicodeError):
+            pass
+
+    # a name server that does not answer must not hold the connect (nor, before the locks'
+    # guard was taken after it, every other lock of this process) for its own timeout
+    t = threading.Thread(target=look_up, name="biafc-lock-lookup", daemon=True)
+    t.start()
+    t.join(LOOKUP_TIMEOUT_S)
+    addresses = sorted({str(info[4][0]) for info in list(found)}, key=ipaddress.ip_address)
+    return addresses[0] if addresses and not t.is_alive() else host.upper()
 
 
 def _name(address: str) -> str:
@@ -150,11 +166,12 @@ def lock_instruments(addresses: dict[str, str]) -> InstrumentLocks:
     taken: list[Path] = []
     locks = InstrumentLocks(taken)
     folder = _folder()
+    names = {role: _name(address) for role, address in addresses.items()}  # before the guard
     with _GUARD:
         try:
             roles: dict[Path, str] = {}
             for role, address in addresses.items():
-                path = folder / _name(address)
+                path = folder / names[role]
                 if path in roles:  # one bench file naming one device for two roles
                     raise InstrumentInUse(
                         f"the {roles[path]} and the {role} are one device ({address}): give each "

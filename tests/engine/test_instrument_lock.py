@@ -210,3 +210,30 @@ def test_a_lan_or_usb_generator_is_one_lock_whatever_its_spelling(
     with pytest.raises(InstrumentInUse, match="the vibrometer and the stage are one device"):
         lock_instruments({"vibrometer": "ASRL3::INSTR", "stage": "COM3"})
     assert _locks(tmp_path) == []  # nothing kept
+
+
+def test_a_host_name_that_does_not_resolve_in_time_is_its_own_key(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A reviewer: the lookup had no time limit and ran while the process's lock guard was
+    held, so a name server that did not answer held every other lock of the process too."""
+    import socket
+    import threading
+    import time
+
+    import daq.instrument_lock as il
+
+    release = threading.Event()
+
+    def hangs(*args: object, **kwargs: object) -> list[object]:
+        release.wait(10)
+        return []
+
+    monkeypatch.setattr(socket, "getaddrinfo", hangs)
+    monkeypatch.setattr(il, "LOOKUP_TIMEOUT_S", 0.2)
+    t0 = time.monotonic()
+    try:
+        assert il.canonical("TCPIP0::slow-dns.lab::INSTR") == "TCPIP::SLOW-DNS.LAB"
+        assert time.monotonic() - t0 < 2.0
+    finally:
+        release.set()
