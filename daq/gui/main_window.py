@@ -110,6 +110,8 @@ class MainWindow(QMainWindow):
         self.plan: Any = None
         self.engine: Any = None
         self.adapter: EngineEventAdapter | None = None
+        #: the engine's FINISHED is not handled yet (:attr:`running`)
+        self._run_open = False
         self.live = LiveData()
         self.last_result: Any = None
         #: the process's exit status, as run_protocol's: the last run's (0 complete, 1 failed
@@ -283,8 +285,22 @@ class MainWindow(QMainWindow):
 
     @property
     def running(self) -> bool:
-        """True while a run is active (running or paused)."""
-        return self.engine is not None and self.engine.state.value in ("running", "paused")
+        """True while a run is active: from Start (the engine made, its thread perhaps not yet
+        begun) until the window has handled the engine's FINISHED. Before, only the engine's
+        state counted: in the gap after Start, Abort and Close were ignored (the run went on,
+        or its transports were closed under it), and after an UNSAFE end not yet handled,
+        Close skipped the question and exited 0."""
+        return self.engine is not None and self._run_open
+
+    def _handle_ended_run(self) -> None:
+        """The run's FINISHED, if the engine has ended and the window has not handled it yet
+        (the GUI thread was busy): handled now, so the window's outcome is the run's."""
+        engine = self.engine
+        if engine is None or not self._run_open or engine.result is None:
+            return
+        engine.wait(5.0)  # FINISHED is emitted just after the result is set
+        if self.adapter is not None:
+            self._on_events()
 
     # -- bench -----------------------------------------------------------------------------
     def _ask_bench(self) -> None:
@@ -701,6 +717,7 @@ class MainWindow(QMainWindow):
         adapter.events_ready.connect(self._on_events)
         engine.subscribe(adapter)
         self.engine, self.adapter, self.run_path = engine, adapter, out
+        self._run_open = True
         self.last_result = None
         self.run_panel.progress.setMaximum(engine.plan.n_points)
         self.run_panel.progress.setValue(self.live.n_points)  # a resumed run's points: done
@@ -820,6 +837,7 @@ class MainWindow(QMainWindow):
         from daq.engine.outcome import final_line
 
         status = str(d["status"])
+        self._run_open = False
         self.last_result = self.engine.result if self.engine is not None else None
         self.run_panel.set_state(status)
         level = "info" if status == "complete" else "error"
@@ -1007,6 +1025,7 @@ class MainWindow(QMainWindow):
 
     def closeEvent(self, event: QCloseEvent) -> None:
         signum = self._stop_signal
+        self._handle_ended_run()  # a run that ended unhandled: its outcome, not a question
         self._pending_start = self._prefilling = None  # a start under way does not go ahead
         if not self.running and signum is not None and self.exit_status != 3:
             self.exit_status = 128 + signum  # idle: the signal's own (an unsafe end's 3 stays)

@@ -1,0 +1,111 @@
+"""A run is active from Start until the window has handled its end: the gap after Start (the
+engine's thread not yet begun) and an end not yet handled (the GUI thread busy)."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+import daq.engine.engine as engine_module
+from daq.connect import connect_bench
+from daq.gui.main_window import MainWindow
+
+from .conftest import SMOKE, connect, make_assembler, wait_until
+
+
+@pytest.fixture
+def slow_thread_start(monkeypatch: Any) -> None:
+    """The engine's thread begins 0.3 s after Start (a loaded two-core PC)."""
+    real = engine_module.RunEngine.run
+
+    def run(self: Any) -> Any:
+        time.sleep(0.3)
+        return real(self)
+
+    monkeypatch.setattr(engine_module.RunEngine, "run", run)
+
+
+def _window(qtbot: Any, out: Path, assembler: Any = None) -> MainWindow:
+    win = MainWindow(None, SMOKE, assembler=assembler or make_assembler(read_sleep_s=0.05))
+    win.confirm_close = lambda: True  # type: ignore[method-assign]
+    qtbot.addWidget(win)
+    win.run_panel.out_edit.setText(str(out))
+    win.show()
+    return win
+
+
+@pytest.mark.usefixtures("slow_thread_start")
+def test_abort_in_the_gap_after_start_is_honoured(qtbot: Any, tmp_path: Path) -> None:
+    """Abort pressed before the engine's thread began was ignored: the run went to its end."""
+    win = _window(qtbot, tmp_path / "gap.h5")
+    connect(qtbot, win)
+    with qtbot.waitSignal(win.run_finished, timeout=60_000) as blocker:
+        win.run_panel.start_button.click()
+        assert win.running and win.run_panel.abort_button.isEnabled()
+        win.run_panel.abort_button.click()
+    assert blocker.args == ["aborted"]
+    assert win.live.n_points == 0 and not win.running
+
+
+@pytest.mark.usefixtures("slow_thread_start")
+def test_pause_in_the_gap_after_start_pauses_the_run(qtbot: Any, tmp_path: Path) -> None:
+    """Pause pressed before the engine's thread began was dropped: the run did not pause."""
+    win = _window(qtbot, tmp_path / "gap.h5")
+    connect(qtbot, win)
+    win.run_panel.start_button.click()
+    win.run_panel.pause_button.click()
+    wait_until(qtbot, lambda: win.engine.state.value == "paused", 10)
+    qtbot.wait(500)
+    assert win.live.n_points == 0  # nothing measured while paused
+    assert win.run_panel.resume_button.isEnabled()
+    win.run_panel.resume_button.click()
+    wait_until(qtbot, lambda: win.live.n_points >= 1, 30)
+    with qtbot.waitSignal(win.run_finished, timeout=60_000) as blocker:
+        win.run_panel.abort_button.click()
+    assert blocker.args == ["aborted"]
+
+
+@pytest.mark.usefixtures("slow_thread_start")
+def test_close_in_the_gap_after_start_asks_and_aborts(qtbot: Any, tmp_path: Path) -> None:
+    """Close in the gap did not ask, closed the transports under the starting engine (which
+    then ended UNSAFE) and exited 0."""
+    win = _window(qtbot, tmp_path / "gap.h5")
+    asked: list[int] = []
+
+    def confirm() -> bool:
+        asked.append(1)
+        return True
+
+    win.confirm_close = confirm  # type: ignore[method-assign]
+    connect(qtbot, win)
+    win.run_panel.start_button.click()
+    engine = win.engine
+    assert win.close()
+    assert asked == [1]
+    assert engine.result is not None and engine.result.status == "aborted"
+    assert win.exit_status == 1  # run_protocol's for an aborted run
+
+
+def test_close_after_an_unsafe_end_not_yet_handled_exits_3(qtbot: Any, tmp_path: Path) -> None:
+    """The engine ended UNSAFE while the GUI thread was busy: Close skipped the question (the
+    engine's state was no longer 'running') and the window exited 0."""
+
+    def silent(bf: Any, seed: int | None) -> Any:
+        return connect_bench(
+            bf, seed=seed, faults={"generator_silent": True, "after_acquisitions": 3}
+        )
+
+    win = _window(qtbot, tmp_path / "u.h5", assembler=silent)
+    connect(qtbot, win)
+    win.run_panel.start_button.click()
+    deadline = time.monotonic() + 60
+    while win.engine.result is None and time.monotonic() < deadline:
+        time.sleep(0.01)  # the GUI thread busy: no event handled
+    assert win.engine.result is not None and win.engine.result.status == "unsafe"
+    assert win.running  # its end is not handled yet
+    assert win.close()
+    assert win.exit_status == 3
+    assert win.bench_panel.status_label.text().startswith("✗ UNSAFE")
