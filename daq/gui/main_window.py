@@ -112,6 +112,9 @@ class MainWindow(QMainWindow):
         self.adapter: EngineEventAdapter | None = None
         #: the engine's FINISHED is not handled yet (:attr:`running`)
         self._run_open = False
+        #: the bench panel's "UNSAFE" of a run that could not confirm its safe state: up until
+        #: a safe state is confirmed (:meth:`_clear_unsafe_mark`), whatever else the panel says
+        self._unsafe_mark: str | None = None
         self.live = LiveData()
         self.last_result: Any = None
         #: the process's exit status, as run_protocol's: the last run's (0 complete, 1 failed
@@ -320,7 +323,7 @@ class MainWindow(QMainWindow):
         try:
             bf = load_bench(path)
         except (ConfigError, OSError) as exc:
-            self.bench_panel.status_label.setText(f"✗ {exc}")
+            self._bench_status(f"✗ {exc}")
             self.log(str(exc), "error")
             return False
         self._disconnect()
@@ -328,7 +331,7 @@ class MainWindow(QMainWindow):
         shown = Path(path) if path is not None else default_bench_path()
         self.bench_panel.path_edit.setText(shown_path(shown))
         kind = "simulated" if bf.bench.simulated else "hardware"
-        self.bench_panel.status_label.setText(
+        self._bench_status(
             f"{bf.bench.name} ({kind}, {bf.bench.n_cylinders} cylinders): not connected"
         )
         self.log(f"bench {bf.bench.name!r} loaded ({kind})")
@@ -394,13 +397,15 @@ class MainWindow(QMainWindow):
         self._disconnect()
         self._busy_connect = True
         self.bench_panel.set_connected(False, busy=True)
-        self.bench_panel.status_label.setStyleSheet("")
-        self.bench_panel.status_label.setText(f"{bf.bench.name}: connecting…")
+        self._bench_status(f"{bf.bench.name}: connecting…")
         assembler = self._assembler
+        unsafe = self._unsafe_mark is not None
+        channels = sorted(set(bf.bench.direction_channel.values()))
 
-        def work() -> tuple[Any, dict[str, Any]]:
+        def work() -> tuple[Any, dict[str, Any], list[str] | None]:
             inst = assembler(bf, seed)
-            return inst, inst.snapshot()
+            # after an UNSAFE end: what the instruments say now, read back (nothing switched)
+            return inst, inst.snapshot(), _not_confirmed_off(inst, channels) if unsafe else None
 
         BackgroundCall(work, lambda r, e: self._connected(bf, r, e), name="biafc-gui-connect")
 
@@ -418,7 +423,7 @@ class MainWindow(QMainWindow):
             BackgroundCall(dropped.close, closed, name="biafc-gui-close-dropped")
         if err is not None or bf is not self.bench_file:
             msg = f"connect failed: {err}" if err is not None else "bench changed"
-            self.bench_panel.status_label.setText(f"✗ {msg}")
+            self._bench_status(f"✗ {msg}")
             self.bench_panel.set_connected(False)
             self.log(msg, "error")
             if self._pending_start is not None:  # the start it waited for does not happen
@@ -426,11 +431,21 @@ class MainWindow(QMainWindow):
                 self.run_panel.set_state("idle")
             self.connected.emit(False)
             return
-        inst, snap = result
+        inst, snap, not_off = result
         self.instruments = inst
         self.chain = inst.chain
         self.bench_panel.set_connected(True)
-        self.bench_panel.status_label.setText(f"{bf.bench.name}: connected ({inst.backend})")
+        if self._unsafe_mark is not None and not_off == []:  # read back: every output off
+            self.log("the last run's UNSAFE is taken down: after Reconnect every output reads "
+                     "back off and the stage is at rest")  # fmt: skip
+            self._clear_unsafe_mark()
+        elif self._unsafe_mark is not None:  # before, Reconnect took it down unchecked
+            self.log(
+                "UNSAFE still holds after Reconnect: "
+                + "; ".join(not_off or ["the outputs were not read back"]),
+                "error",
+            )
+        self._bench_status(f"{bf.bench.name}: connected ({inst.backend})")
         self.bench_panel.show_snapshot(snap)
         self.views.show_chain(self.chain, self._f_in())
         self.log(f"connected to {bf.bench.name!r} ({inst.backend})")
@@ -461,8 +476,7 @@ class MainWindow(QMainWindow):
             # before, a failed read left the last state shown, and said nothing
             line = f"instrument state not read: {str(err).splitlines()[0] if str(err) else err!r}"
             self.bench_panel.tree.clear()
-            self.bench_panel.status_label.setStyleSheet("QLabel { color: #b00000; }")
-            self.bench_panel.status_label.setText(f"✗ {line}")
+            self._bench_status(f"✗ {line}", "QLabel { color: #b00000; }")
             self.log(line, "error")
 
         BackgroundCall(self._locked(inst.snapshot), done, name="biafc-gui-snapshot")
@@ -858,13 +872,11 @@ class MainWindow(QMainWindow):
         self.run_panel.where_label.setStyleSheet(f"QLabel {{ {style} }}" if style else "")
         if status == "unsafe":
             self.statusBar().showMessage(line)
-            self.bench_panel.status_label.setStyleSheet(
-                "QLabel { color: #b00000; font-weight: bold; }"
-            )
-            self.bench_panel.status_label.setText(
+            self._unsafe_mark = (
                 "✗ UNSAFE: the safe state was not confirmed; switch off by hand what the "
                 "run's last line names"
             )
+            self._bench_status("")
         if self.last_result is not None:  # the process's status is the last run's, as
             from daq.engine.outcome import exit_code  # run_protocol's (0 when it completed)
 
@@ -891,15 +903,27 @@ class MainWindow(QMainWindow):
             self.log(ready_line(elapsed_s))
             self.run_panel.where_label.setText(ready_line(elapsed_s))
 
-    def _clear_unsafe_mark(self) -> None:
-        """Take down the bench panel's "UNSAFE" of an earlier run (once a Safe state has
-        confirmed every output off, or a new run starts): it stayed up until Reconnect."""
+    def _bench_status(self, text: str, style: str = "") -> None:
+        """The bench panel's status line: ``text``, below the "UNSAFE" of an earlier run while
+        that holds (before, Connect's "connecting…", its failure or its success replaced it)."""
         label = self.bench_panel.status_label
-        if label.text().startswith("✗ UNSAFE"):
-            label.setStyleSheet("")
-            name = self.bench_file.bench.name if self.bench_file is not None else "bench"
-            backend = getattr(self.instruments, "backend", "")
-            label.setText(f"{name}: connected ({backend})" if backend else name)
+        if self._unsafe_mark is None:
+            label.setStyleSheet(style)
+            label.setText(text)
+            return
+        label.setStyleSheet("QLabel { color: #b00000; font-weight: bold; }")
+        label.setText(f"{self._unsafe_mark}\n{text}" if text else self._unsafe_mark)
+
+    def _clear_unsafe_mark(self) -> None:
+        """Take down the bench panel's "UNSAFE" of an earlier run: once a Safe state, or the
+        outputs read back after a Reconnect, confirmed every output off (or a new run starts).
+        Before, a Reconnect took it down unchecked, a generator output reported on."""
+        if self._unsafe_mark is None:
+            return
+        self._unsafe_mark = None
+        name = self.bench_file.bench.name if self.bench_file is not None else "bench"
+        backend = getattr(self.instruments, "backend", "")
+        self._bench_status(f"{name}: connected ({backend})" if backend else name)
 
     def _redraw_if_dirty(self) -> None:
         interval = self._pace.tick()
@@ -1096,6 +1120,28 @@ class MainWindow(QMainWindow):
         for call in list(BackgroundCall._alive):
             call.worker.join(timeout=5.0)
         event.accept()
+
+
+def _not_confirmed_off(instruments: Any, channels: list[int]) -> list[str]:
+    """What of the bench is not confirmed safe by reading it back, nothing switched: each of
+    the generator's ``channels`` whose output reads on or cannot be read, a stage that moves or
+    does not say (an empty list: every output off, the stage at rest)."""
+    from daq.engine.safe_state import generator_name
+
+    gen = instruments.generator
+    said: list[str] = []
+    for ch in channels:
+        try:
+            if gen.output_state(ch):
+                said.append(f"{generator_name(gen)} output {ch} is ON")
+        except Exception as exc:
+            said.append(f"{generator_name(gen)} output {ch}: cannot read it back ({exc})")
+    try:
+        if instruments.stage.is_moving():
+            said.append("stage controller: the axis moves")
+    except Exception as exc:
+        said.append(f"stage: cannot read whether it moves ({exc})")
+    return said
 
 
 #: the run panel's line while a run is paused
