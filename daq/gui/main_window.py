@@ -124,6 +124,7 @@ class MainWindow(QMainWindow):
         #: the stop signal that closes the window (:meth:`stop_signal`), or None
         self._stop_signal: int | None = None
         self._closing = False  # a close is waiting for the run's safe state
+        self._closed = False  # the window has closed (:meth:`_finish_close`)
         self._asking_close = False  # Close's question (confirm_close) is on screen
         self.run_path: Path | None = None
         self._dirty = False
@@ -411,6 +412,15 @@ class MainWindow(QMainWindow):
 
     def _connected(self, bf: Any, result: Any, err: BaseException | None) -> None:
         self._busy_connect = False
+        if self._closed:  # the window closed while they connected: closed here, not kept
+            if err is None:  # on a closed window (before, their ports and locks stayed open)
+                try:
+                    result[0].close()
+                except Exception as exc:
+                    logging.getLogger("biafc.gui").warning(
+                        "closing the instruments connected after the window closed: %s", exc
+                    )
+            return
         if err is None and bf is not self.bench_file:  # connected to a bench file changed
             # since: closed (its ports and instrument locks were kept until the window closed,
             # and a run_protocol was refused "in use by" this window; a second reader)
@@ -1119,6 +1129,9 @@ class MainWindow(QMainWindow):
         # interpreter's exit crashed the process (exit -11 after a stop signal mid-run)
         for call in list(BackgroundCall._alive):
             call.worker.join(timeout=5.0)
+        self._closed = True
+        if self._busy_connect:  # a connect ended meanwhile: its instruments closed now, not
+            QApplication.processEvents()  # left to an event loop that may not turn again
         event.accept()
 
 

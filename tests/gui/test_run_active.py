@@ -109,3 +109,39 @@ def test_close_after_an_unsafe_end_not_yet_handled_exits_3(qtbot: Any, tmp_path:
     assert win.close()
     assert win.exit_status == 3
     assert win.bench_panel.status_label.text().startswith("✗ UNSAFE")
+
+
+def test_instruments_connected_after_the_window_closed_are_closed(
+    qtbot: Any, tmp_path: Path
+) -> None:
+    """Close while Start waited for the bench to connect: the instruments that arrived after
+    were kept on the closed window, their ports and instrument locks open."""
+    import threading
+
+    gate = threading.Event()
+    made: list[Any] = []
+    real = make_assembler()
+
+    def slow(bf: Any, seed: int | None) -> Any:
+        gate.wait(10)
+        inst = real(bf, seed)
+        closed = inst.close
+        inst.closed = False
+
+        def close() -> None:
+            inst.closed = True
+            closed()
+
+        inst.close = close
+        made.append(inst)
+        return inst
+
+    win = _window(qtbot, tmp_path / "never.h5", assembler=slow)
+    win.run_panel.start_button.click()  # not connected: it connects first
+    assert win.run_panel.abort_button.isEnabled()
+    threading.Timer(0.5, gate.set).start()
+    assert win.close()
+    qtbot.wait(500)  # the event loop of a process that goes on
+    assert made and all(inst.closed for inst in made)
+    assert win.instruments is None and win.engine is None
+    assert not (tmp_path / "never.h5").exists()
