@@ -183,6 +183,8 @@ class MainWindow(QMainWindow):
         bp, pp = self.bench_panel, self.protocol_panel
         for button in (bp.open_button, bp.connect_button, pp.open_button):
             button.setEnabled(not active)
+        for action in self._run_locked_actions:  # File → Open bench… / Open protocol… too:
+            action.setEnabled(not active)  # before, they replaced the editor mid-run
         bp.refresh_button.setEnabled(not active and self.instruments is not None)
         pp.editor.setReadOnly(active)
 
@@ -259,6 +261,8 @@ class MainWindow(QMainWindow):
 
     def _menus(self) -> None:
         m = self.menuBar().addMenu("&File")
+        #: the menu's twins of the panels' Open… buttons: locked with them during a run
+        self._run_locked_actions: list[QAction] = []
         for text, slot in (
             ("Open bench…", self._ask_bench),
             ("Open protocol…", self._ask_protocol),
@@ -269,6 +273,8 @@ class MainWindow(QMainWindow):
             act = QAction(text, self)
             act.triggered.connect(slot)
             m.addAction(act)
+            if slot in (self._ask_bench, self._ask_protocol):
+                self._run_locked_actions.append(act)
         m.addSeparator()
         quit_act = QAction("Quit", self)
         quit_act.triggered.connect(self.close)

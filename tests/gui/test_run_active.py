@@ -145,3 +145,38 @@ def test_instruments_connected_after_the_window_closed_are_closed(
     assert made and all(inst.closed for inst in made)
     assert win.instruments is None and win.engine is None
     assert not (tmp_path / "never.h5").exists()
+
+
+def _action(win: MainWindow, text: str) -> Any:
+    menu: Any = win.menuBar().actions()[0].menu()
+    for action in menu.actions():
+        if action.text() == text:
+            return action
+    raise KeyError(text)
+
+
+def test_the_file_menus_open_waits_for_the_run_as_the_panels_buttons(
+    qtbot: Any, tmp_path: Path, monkeypatch: Any
+) -> None:
+    """File → Open protocol… replaced the editor's protocol mid-run (the panel's Open… was
+    locked, the menu's was not), and Open bench… worked while Start waited to connect."""
+    from PySide6.QtWidgets import QFileDialog
+
+    other = SMOKE.parent / "rtl_highamp.yaml"
+    monkeypatch.setattr(
+        QFileDialog, "getOpenFileName", staticmethod(lambda *a, **k: (str(other), ""))
+    )
+    win = _window(qtbot, tmp_path / "run.h5")
+    opens = [_action(win, "Open protocol…"), _action(win, "Open bench…")]
+    assert all(a.isEnabled() for a in opens)
+    with qtbot.waitSignal(win.connected, timeout=60_000):
+        win.run_panel.start_button.click()  # not connected: it connects first
+        assert not any(a.isEnabled() for a in opens)  # starting
+    wait_until(qtbot, lambda: win.live.n_points >= 1)
+    assert not any(a.isEnabled() for a in opens)  # running
+    opens[0].trigger()
+    qtbot.wait(100)
+    assert "smoke" in win.protocol_panel.path_edit.text()
+    with qtbot.waitSignal(win.run_finished, timeout=60_000):
+        win.run_panel.abort_button.click()
+    assert all(a.isEnabled() for a in opens)
