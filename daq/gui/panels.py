@@ -26,6 +26,7 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
+from daq.gui.views import amplitude_text
 from daq.progress import format_duration
 
 __all__ = ["BenchPanel", "LogView", "ProtocolPanel", "RunPanel", "format_duration"]
@@ -267,8 +268,7 @@ class RunPanel(QGroupBox):
         self.progress.setMaximum(int(d["total"]))
         self.progress.setValue(int(d["done"]))
         amp = float(d.get("amplitude", float("nan")))
-        units = str(d.get("amplitude_units", ""))
-        amp_text = f"{amp * 1e6:.3g} um" if units == "m" else f"{amp:.3g} Vpp"
+        amp_text = amplitude_text(amp, str(d.get("amplitude_units", "")))
         self.where_label.setText(
             f"{d['direction']}  ·  amplitude {amp_text}  ·  cylinder {d['cylinder']}"
             f"  ·  elapsed {format_duration(d['elapsed_s'])}  ·  ETA {format_duration(d['eta_s'])}"
