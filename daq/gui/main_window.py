@@ -115,6 +115,8 @@ class MainWindow(QMainWindow):
         #: the bench panel's "UNSAFE" of a run that could not confirm its safe state: up until
         #: a safe state is confirmed (:meth:`_clear_unsafe_mark`), whatever else the panel says
         self._unsafe_mark: str | None = None
+        #: a run file opened during a run: read and shown once the run has ended
+        self._open_after_run: tuple[Path, Callable[[bool], None] | None] | None = None
         self.live = LiveData()
         self.last_result: Any = None
         #: the process's exit status, as run_protocol's: the last run's (0 complete, 1 failed
@@ -904,6 +906,9 @@ class MainWindow(QMainWindow):
         detach(getattr(self, "_run_log", None))
         self._run_log = None
         self.run_finished.emit(status)
+        if self._open_after_run is not None:  # promised when it was opened during the run
+            (path, on_done), self._open_after_run = self._open_after_run, None
+            self.open_run_file(path, on_done)
 
     def _show_compile(self, phase: str, elapsed_s: float, folder: str, cold: bool) -> None:
         """The command line's compile notice, in the log and the run panel's line."""
@@ -978,10 +983,9 @@ class MainWindow(QMainWindow):
                     on_done(False)
                 return
             run, live = result
-            if self.running:
-                self.log("a run is active: the file is shown after it ends", "warning")
-                if on_done:
-                    on_done(False)
+            if self.running:  # read again then: it may be the run's own file
+                self._open_after_run = (p, on_done)
+                self.log(f"a run is active: {p.name} is shown after it ends", "warning")
                 return
             self.live = live
             self.run_path = p
@@ -1067,6 +1071,7 @@ class MainWindow(QMainWindow):
         signum = self._stop_signal
         self._handle_ended_run()  # a run that ended unhandled: its outcome, not a question
         self._pending_start = self._prefilling = None  # a start under way does not go ahead
+        self._open_after_run = None  # nor a run file waiting to be shown
         if not self.running and signum is not None and self.exit_status != 3:
             self.exit_status = 128 + signum  # idle: the signal's own (an unsafe end's 3 stays)
         if self.running:

@@ -180,3 +180,25 @@ def test_the_file_menus_open_waits_for_the_run_as_the_panels_buttons(
     with qtbot.waitSignal(win.run_finished, timeout=60_000):
         win.run_panel.abort_button.click()
     assert all(a.isEnabled() for a in opens)
+
+
+def test_a_run_file_opened_during_a_run_is_shown_after_it(qtbot: Any, tmp_path: Path) -> None:
+    """File → Open run file… during a run logged "the file is shown after it ends", and it
+    never was."""
+    first = tmp_path / "first.h5"
+    win = _window(qtbot, first)
+    connect(qtbot, win)
+    with qtbot.waitSignal(win.run_finished, timeout=60_000):
+        win.run_panel.start_button.click()
+    wait_until(qtbot, lambda: win.run_panel.start_button.isEnabled(), 10)
+    win.run_panel.out_edit.setText(str(tmp_path / "second.h5"))
+    win.run_panel.start_button.click()
+    assert win.running
+    shown: list[bool] = []
+    with qtbot.waitSignal(win.run_finished, timeout=60_000):
+        win.open_run_file(first, on_done=shown.append)
+        wait_until(qtbot, lambda: any("shown after it ends" in x for x in win.log_view.lines), 30)
+        assert win.running and not shown
+    wait_until(qtbot, lambda: bool(shown), 30)
+    assert shown == [True] and win.run_path == first
+    assert any(f"opened {first.name}" in line for line in win.log_view.lines[-3:])
