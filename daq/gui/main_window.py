@@ -103,6 +103,8 @@ class MainWindow(QMainWindow):
         self.resize(1500, 950)
         self._assembler = assembler or _default_assembler
         self.bench_file: Any = None
+        #: the one-line error of a bench file that did not load while no bench is loaded
+        self._bench_error: str | None = None
         self.instruments: Any = None
         self.chain: Any = None
         self.protocol_file: Any = None
@@ -183,8 +185,10 @@ class MainWindow(QMainWindow):
         enabled and did nothing, and the editor took edits that the panel then showed as if
         they had run."""
         bp, pp = self.bench_panel, self.protocol_panel
-        for button in (bp.open_button, bp.connect_button, pp.open_button):
+        for button in (bp.open_button, pp.open_button):
             button.setEnabled(not active)
+        bp.connect_button.setEnabled(not active and self.bench_file is not None)  # a bad file:
+        # its error said, nothing to connect to
         for action in self._run_locked_actions:  # File → Open bench… / Open protocol… too:
             action.setEnabled(not active)  # before, they replaced the editor mid-run
         bp.refresh_button.setEnabled(not active and self.instruments is not None)
@@ -334,9 +338,16 @@ class MainWindow(QMainWindow):
         except (ConfigError, OSError) as exc:
             self._bench_status(f"✗ {exc}")
             self.log(str(exc), "error")
+            if self.bench_file is None:  # no bench to connect to or to run on: said as such
+                self._bench_error = str(exc)  # (before, the protocol read valid, Start was
+                self.bench_panel.connect_button.setEnabled(False)  # on, Connect silent)
+                self.bench_panel.path_edit.setText(shown_path(path) if path is not None else "")
+                if self.protocol_panel.editor.toPlainText().strip():
+                    self.protocol_panel.validate_now()
             return False
         self._disconnect()
         self.bench_file = bf
+        self._bench_error = None
         shown = Path(path) if path is not None else default_bench_path()
         self.bench_panel.path_edit.setText(shown_path(shown))
         kind = "simulated" if bf.bench.simulated else "hardware"
@@ -399,6 +410,9 @@ class MainWindow(QMainWindow):
 
     def connect_bench(self) -> None:
         """Open the bench's instruments on a worker thread, then show their snapshot."""
+        if self.bench_file is None and self._bench_error is not None:
+            self.log(f"cannot connect: the bench file is not valid: {self._bench_error}", "error")
+            return
         if self.bench_file is None or self._busy_connect or self.running:
             return
         bf = self.bench_file
@@ -574,6 +588,12 @@ class MainWindow(QMainWindow):
         from protocols.yamlfile import ConfigError
 
         source = self.protocol_path.name if self.protocol_path else "<protocol>"
+        if self.bench_file is None and self._bench_error is not None:
+            # nothing to check it against nor run it on: the bench file's error, not "valid"
+            self.protocol_file, self.plan = None, None
+            self.protocol_panel.show_error(f"no bench to run on: {self._bench_error}")
+            self._set_startable(False)
+            return
         try:
             pf = parse_protocol(text, source)
             proto = pf.protocol
@@ -680,6 +700,10 @@ class MainWindow(QMainWindow):
             return False
         if not isinstance(resume_path, Path):
             resume_path = None  # a clicked() bool
+        if self.bench_file is None and self._bench_error is not None:
+            self.log(f"cannot start: the bench file is not valid: {self._bench_error}", "error")
+            self.run_panel.set_state("idle")
+            return False
         if self._busy:  # the buttons are disabled meanwhile; a call from code is refused
             self.log(f"cannot start yet: {self._busy[0]} is still working on the instruments",
                      "warning")  # fmt: skip

@@ -202,3 +202,33 @@ def test_a_run_file_opened_during_a_run_is_shown_after_it(qtbot: Any, tmp_path: 
     wait_until(qtbot, lambda: bool(shown), 30)
     assert shown == [True] and win.run_path == first
     assert any(f"opened {first.name}" in line for line in win.log_view.lines[-3:])
+
+
+def test_a_bad_bench_file_is_said_and_nothing_starts_on_it(qtbot: Any, tmp_path: Path) -> None:
+    """`biafc gui --bench BAD.yaml`: the protocol panel said valid and Start was enabled, Start
+    then refused "the protocol is not valid", and Connect did nothing, silently."""
+    from protocols.bench import default_bench_path
+
+    text = default_bench_path().read_text(encoding="utf-8")
+    assert "max_amplitude: 10 Vpp" in text
+    bad = tmp_path / "bad_bench.yaml"
+    bad.write_text(text.replace("max_amplitude: 10 Vpp", "max_amplitude: 10 V"), "utf-8")
+    win = MainWindow(bad, SMOKE, assembler=make_assembler())
+    win.confirm_close = lambda: True  # type: ignore[method-assign]
+    qtbot.addWidget(win)
+    win.run_panel.out_edit.setText(str(tmp_path / "never.h5"))
+    win.show()
+    error = "generator.max_amplitude: '10 V' does not say peak or peak-to-peak"
+    assert error in win.bench_panel.status_label.text()
+    status = win.protocol_panel.status_label.text()
+    assert status.startswith("✗") and error in status and "valid" not in status.split(":")[0]
+    assert not win.run_panel.start_button.isEnabled()
+    assert not win.protocol_panel.dry_button.isEnabled()
+    assert not win.bench_panel.connect_button.isEnabled()
+    n = len(win.log_view.lines)
+    win.connect_bench()  # from code: refused, naming the bench file's error
+    assert error in win.log_view.lines[-1] and "cannot connect" in win.log_view.lines[-1]
+    assert not win.start_run(tmp_path / "never.h5")  # Resume file…: the same
+    assert error in win.log_view.lines[-1] and "cannot start" in win.log_view.lines[-1]
+    assert len(win.log_view.lines) == n + 2 and win.instruments is None
+    assert not (tmp_path / "never.h5").exists()
