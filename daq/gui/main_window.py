@@ -193,6 +193,9 @@ class MainWindow(QMainWindow):
             action.setEnabled(not active)  # before, they replaced the editor mid-run
         bp.refresh_button.setEnabled(not active and self.instruments is not None)
         pp.editor.setReadOnly(active)
+        # a dry run checks the output as a new run would: during a run it named this window
+        # as "the other writer" of a file (its own PID)
+        pp.dry_button.setEnabled(not active and pp.valid)
 
     def _locked(self, fn: Callable[[], Any]) -> Callable[[], Any]:
         """``fn`` run under the window's instrument lock (on the worker that calls it)."""
@@ -622,7 +625,7 @@ class MainWindow(QMainWindow):
     def _set_startable(self, ok: bool) -> None:
         """Start and Dry run only with a valid protocol (they only logged a refusal before)."""
         self.run_panel.set_startable(ok)
-        self.protocol_panel.dry_button.setEnabled(ok)
+        self.protocol_panel.dry_button.setEnabled(ok and not self.run_panel.active)
 
     def _f_in(self, pf: Any = None) -> float | None:
         """The input frequency (Hz) the bands view marks: of protocol ``pf`` (default: the
@@ -655,6 +658,9 @@ class MainWindow(QMainWindow):
 
     def dry_run(self) -> None:
         """Validate and report point count, ETA and output path; nothing moves."""
+        if self.run_panel.active:  # the button is disabled meanwhile; a call from code
+            self.log("dry run: a run is active; try again after it ends", "warning")
+            return
         self.protocol_panel.validate_now()
         if self.protocol_file is None or self.plan is None:
             self.log("dry run: the protocol is not valid (see the protocol panel)", "error")
@@ -773,6 +779,7 @@ class MainWindow(QMainWindow):
         adapter.events_ready.connect(self._on_events)
         engine.subscribe(adapter)
         self.engine, self.adapter, self.run_path = engine, adapter, out
+        self.setWindowTitle(f"biafc-lab — {out.name}")  # not a file browsed before the run
         self._run_open = True
         self.last_result = None
         self.run_panel.progress.setMaximum(engine.plan.n_points)

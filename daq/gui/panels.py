@@ -251,6 +251,11 @@ class RunPanel(QGroupBox):
         self._startable = startable
         self.set_state(self._state)
 
+    @property
+    def active(self) -> bool:
+        """A run starts, runs or is paused."""
+        return self._state in ("running", "paused", "starting")
+
     def set_state(self, state: str) -> None:
         """Enable the buttons that make sense in engine state ``state``."""
         self._state = state

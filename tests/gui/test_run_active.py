@@ -232,3 +232,29 @@ def test_a_bad_bench_file_is_said_and_nothing_starts_on_it(qtbot: Any, tmp_path:
     assert error in win.log_view.lines[-1] and "cannot start" in win.log_view.lines[-1]
     assert len(win.log_view.lines) == n + 2 and win.instruments is None
     assert not (tmp_path / "never.h5").exists()
+
+
+def test_a_run_names_its_file_in_the_title_and_dry_run_waits_for_it(
+    qtbot: Any, tmp_path: Path
+) -> None:
+    """The title kept naming a file browsed before a run, during and after it; Dry run stayed
+    enabled during a run and refused naming the window's own PID as the other writer."""
+    browsed = tmp_path / "browsed.h5"
+    win = _window(qtbot, browsed, assembler=make_assembler(read_sleep_s=0.0))
+    connect(qtbot, win)
+    with qtbot.waitSignal(win.run_finished, timeout=60_000):
+        win.run_panel.start_button.click()
+    with qtbot.waitCallback(timeout=30_000) as opened:
+        win.open_run_file(browsed, on_done=opened)
+    assert "browsed.h5" in win.windowTitle()
+    wait_until(qtbot, lambda: win.run_panel.start_button.isEnabled(), 10)
+    win.run_panel.out_edit.setText(str(tmp_path / "next.h5"))
+    assert win.protocol_panel.dry_button.isEnabled()
+    with qtbot.waitSignal(win.run_finished, timeout=60_000):
+        win.run_panel.start_button.click()
+        assert "next.h5" in win.windowTitle() and "browsed" not in win.windowTitle()
+        assert not win.protocol_panel.dry_button.isEnabled()
+        win.dry_run()  # from code: refused, without a PID
+        assert "a run is active" in win.log_view.lines[-1]
+    assert "next.h5" in win.windowTitle()
+    assert win.protocol_panel.dry_button.isEnabled()
