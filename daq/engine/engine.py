@@ -212,6 +212,7 @@ class RunEngine:
         self._abort_t: float | None = None  # monotonic time of the first abort request
         self._running = threading.Event()  # set while not paused
         self._running.set()
+        self._pause_at_start = False  # paused before the run's thread began (pause)
         self._thread: threading.Thread | None = None
         self._writer: RunFileWriter | None = None
         self._tail = 0  # samples read past each record's window (_configure_digitiser)
@@ -232,17 +233,25 @@ class RunEngine:
             return self._state
 
     def pause(self) -> None:
-        """Pause at the next point boundary (no effect unless running)."""
+        """Pause at the next point boundary (no effect once the run has ended). Asked before the
+        run's thread has begun (the gap after :meth:`start`), the run begins paused: before, a
+        Pause pressed then was dropped and the run went on."""
         with self._lock:
             if self._state == RunState.RUNNING:
                 self._running.clear()
                 self._set_state(RunState.PAUSED)
+            elif self._state == RunState.IDLE and not self._abort.is_set():
+                self._pause_at_start = True
+                self._running.clear()
 
     def resume(self) -> None:
-        """Continue a paused run."""
+        """Continue a paused run (or cancel a pause asked before the run began)."""
         with self._lock:
             if self._state == RunState.PAUSED:
                 self._set_state(RunState.RUNNING)
+                self._running.set()
+            elif self._state == RunState.IDLE and self._pause_at_start:
+                self._pause_at_start = False
                 self._running.set()
 
     def abort(self, reason: str = "aborted by the user") -> None:
@@ -373,7 +382,9 @@ class RunEngine:
             if self._state != RunState.IDLE:
                 raise RuntimeError("a RunEngine runs once; make a new one")
             self._state = RunState.RUNNING
-        self._emit(EventKind.STATE_CHANGED, "idle -> running", state="running", previous="idle")
+            self._emit(EventKind.STATE_CHANGED, "idle -> running", state="running", previous="idle")
+            if self._pause_at_start and not self._abort.is_set():  # paused before it began:
+                self._set_state(RunState.PAUSED)  # the first point boundary waits for Resume
         try:
             with self._awake():
                 n_done, n_failed, status, reason = self._run_points(t0)

@@ -103,6 +103,8 @@ class MainWindow(QMainWindow):
         self.resize(1500, 950)
         self._assembler = assembler or _default_assembler
         self.bench_file: Any = None
+        #: the one-line error of a bench file that did not load while no bench is loaded
+        self._bench_error: str | None = None
         self.instruments: Any = None
         self.chain: Any = None
         self.protocol_file: Any = None
@@ -110,6 +112,13 @@ class MainWindow(QMainWindow):
         self.plan: Any = None
         self.engine: Any = None
         self.adapter: EngineEventAdapter | None = None
+        #: the engine's FINISHED is not handled yet (:attr:`running`)
+        self._run_open = False
+        #: the bench panel's "UNSAFE" of a run that could not confirm its safe state: up until
+        #: a safe state is confirmed (:meth:`_clear_unsafe_mark`), whatever else the panel says
+        self._unsafe_mark: str | None = None
+        #: a run file opened during a run: read and shown once the run has ended
+        self._open_after_run: tuple[Path, Callable[[bool], None] | None] | None = None
         self.live = LiveData()
         self.last_result: Any = None
         #: the process's exit status, as run_protocol's: the last run's (0 complete, 1 failed
@@ -119,6 +128,7 @@ class MainWindow(QMainWindow):
         #: the stop signal that closes the window (:meth:`stop_signal`), or None
         self._stop_signal: int | None = None
         self._closing = False  # a close is waiting for the run's safe state
+        self._closed = False  # the window has closed (:meth:`_finish_close`)
         self._asking_close = False  # Close's question (confirm_close) is on screen
         self.run_path: Path | None = None
         self._dirty = False
@@ -175,10 +185,17 @@ class MainWindow(QMainWindow):
         enabled and did nothing, and the editor took edits that the panel then showed as if
         they had run."""
         bp, pp = self.bench_panel, self.protocol_panel
-        for button in (bp.open_button, bp.connect_button, pp.open_button):
+        for button in (bp.open_button, pp.open_button):
             button.setEnabled(not active)
+        bp.connect_button.setEnabled(not active and self.bench_file is not None)  # a bad file:
+        # its error said, nothing to connect to
+        for action in self._run_locked_actions:  # File → Open bench… / Open protocol… too:
+            action.setEnabled(not active)  # before, they replaced the editor mid-run
         bp.refresh_button.setEnabled(not active and self.instruments is not None)
         pp.editor.setReadOnly(active)
+        # a dry run checks the output as a new run would: during a run it named this window
+        # as "the other writer" of a file (its own PID)
+        pp.dry_button.setEnabled(not active and pp.valid)
 
     def _locked(self, fn: Callable[[], Any]) -> Callable[[], Any]:
         """``fn`` run under the window's instrument lock (on the worker that calls it)."""
@@ -253,6 +270,8 @@ class MainWindow(QMainWindow):
 
     def _menus(self) -> None:
         m = self.menuBar().addMenu("&File")
+        #: the menu's twins of the panels' Open… buttons: locked with them during a run
+        self._run_locked_actions: list[QAction] = []
         for text, slot in (
             ("Open bench…", self._ask_bench),
             ("Open protocol…", self._ask_protocol),
@@ -263,6 +282,8 @@ class MainWindow(QMainWindow):
             act = QAction(text, self)
             act.triggered.connect(slot)
             m.addAction(act)
+            if slot in (self._ask_bench, self._ask_protocol):
+                self._run_locked_actions.append(act)
         m.addSeparator()
         quit_act = QAction("Quit", self)
         quit_act.triggered.connect(self.close)
@@ -283,8 +304,22 @@ class MainWindow(QMainWindow):
 
     @property
     def running(self) -> bool:
-        """True while a run is active (running or paused)."""
-        return self.engine is not None and self.engine.state.value in ("running", "paused")
+        """True while a run is active: from Start (the engine made, its thread perhaps not yet
+        begun) until the window has handled the engine's FINISHED. Before, only the engine's
+        state counted: in the gap after Start, Abort and Close were ignored (the run went on,
+        or its transports were closed under it), and after an UNSAFE end not yet handled,
+        Close skipped the question and exited 0."""
+        return self.engine is not None and self._run_open
+
+    def _handle_ended_run(self) -> None:
+        """The run's FINISHED, if the engine has ended and the window has not handled it yet
+        (the GUI thread was busy): handled now, so the window's outcome is the run's."""
+        engine = self.engine
+        if engine is None or not self._run_open or engine.result is None:
+            return
+        engine.wait(5.0)  # FINISHED is emitted just after the result is set
+        if self.adapter is not None:
+            self._on_events()
 
     # -- bench -----------------------------------------------------------------------------
     def _ask_bench(self) -> None:
@@ -304,15 +339,22 @@ class MainWindow(QMainWindow):
         try:
             bf = load_bench(path)
         except (ConfigError, OSError) as exc:
-            self.bench_panel.status_label.setText(f"✗ {exc}")
+            self._bench_status(f"✗ {exc}")
             self.log(str(exc), "error")
+            if self.bench_file is None:  # no bench to connect to or to run on: said as such
+                self._bench_error = str(exc)  # (before, the protocol read valid, Start was
+                self.bench_panel.connect_button.setEnabled(False)  # on, Connect silent)
+                self.bench_panel.path_edit.setText(shown_path(path) if path is not None else "")
+                if self.protocol_panel.editor.toPlainText().strip():
+                    self.protocol_panel.validate_now()
             return False
         self._disconnect()
         self.bench_file = bf
+        self._bench_error = None
         shown = Path(path) if path is not None else default_bench_path()
         self.bench_panel.path_edit.setText(shown_path(shown))
         kind = "simulated" if bf.bench.simulated else "hardware"
-        self.bench_panel.status_label.setText(
+        self._bench_status(
             f"{bf.bench.name} ({kind}, {bf.bench.n_cylinders} cylinders): not connected"
         )
         self.log(f"bench {bf.bench.name!r} loaded ({kind})")
@@ -371,6 +413,9 @@ class MainWindow(QMainWindow):
 
     def connect_bench(self) -> None:
         """Open the bench's instruments on a worker thread, then show their snapshot."""
+        if self.bench_file is None and self._bench_error is not None:
+            self.log(f"cannot connect: the bench file is not valid: {self._bench_error}", "error")
+            return
         if self.bench_file is None or self._busy_connect or self.running:
             return
         bf = self.bench_file
@@ -378,18 +423,29 @@ class MainWindow(QMainWindow):
         self._disconnect()
         self._busy_connect = True
         self.bench_panel.set_connected(False, busy=True)
-        self.bench_panel.status_label.setStyleSheet("")
-        self.bench_panel.status_label.setText(f"{bf.bench.name}: connecting…")
+        self._bench_status(f"{bf.bench.name}: connecting…")
         assembler = self._assembler
+        unsafe = self._unsafe_mark is not None
+        channels = sorted(set(bf.bench.direction_channel.values()))
 
-        def work() -> tuple[Any, dict[str, Any]]:
+        def work() -> tuple[Any, dict[str, Any], list[str] | None]:
             inst = assembler(bf, seed)
-            return inst, inst.snapshot()
+            # after an UNSAFE end: what the instruments say now, read back (nothing switched)
+            return inst, inst.snapshot(), _not_confirmed_off(inst, channels) if unsafe else None
 
         BackgroundCall(work, lambda r, e: self._connected(bf, r, e), name="biafc-gui-connect")
 
     def _connected(self, bf: Any, result: Any, err: BaseException | None) -> None:
         self._busy_connect = False
+        if self._closed:  # the window closed while they connected: closed here, not kept
+            if err is None:  # on a closed window (before, their ports and locks stayed open)
+                try:
+                    result[0].close()
+                except Exception as exc:
+                    logging.getLogger("biafc.gui").warning(
+                        "closing the instruments connected after the window closed: %s", exc
+                    )
+            return
         if err is None and bf is not self.bench_file:  # connected to a bench file changed
             # since: closed (its ports and instrument locks were kept until the window closed,
             # and a run_protocol was refused "in use by" this window; a second reader)
@@ -402,7 +458,7 @@ class MainWindow(QMainWindow):
             BackgroundCall(dropped.close, closed, name="biafc-gui-close-dropped")
         if err is not None or bf is not self.bench_file:
             msg = f"connect failed: {err}" if err is not None else "bench changed"
-            self.bench_panel.status_label.setText(f"✗ {msg}")
+            self._bench_status(f"✗ {msg}")
             self.bench_panel.set_connected(False)
             self.log(msg, "error")
             if self._pending_start is not None:  # the start it waited for does not happen
@@ -410,11 +466,21 @@ class MainWindow(QMainWindow):
                 self.run_panel.set_state("idle")
             self.connected.emit(False)
             return
-        inst, snap = result
+        inst, snap, not_off = result
         self.instruments = inst
         self.chain = inst.chain
         self.bench_panel.set_connected(True)
-        self.bench_panel.status_label.setText(f"{bf.bench.name}: connected ({inst.backend})")
+        if self._unsafe_mark is not None and not_off == []:  # read back: every output off
+            self.log("the last run's UNSAFE is taken down: after Reconnect every output reads "
+                     "back off and the stage is at rest")  # fmt: skip
+            self._clear_unsafe_mark()
+        elif self._unsafe_mark is not None:  # before, Reconnect took it down unchecked
+            self.log(
+                "UNSAFE still holds after Reconnect: "
+                + "; ".join(not_off or ["the outputs were not read back"]),
+                "error",
+            )
+        self._bench_status(f"{bf.bench.name}: connected ({inst.backend})")
         self.bench_panel.show_snapshot(snap)
         self.views.show_chain(self.chain, self._f_in())
         self.log(f"connected to {bf.bench.name!r} ({inst.backend})")
@@ -445,8 +511,7 @@ class MainWindow(QMainWindow):
             # before, a failed read left the last state shown, and said nothing
             line = f"instrument state not read: {str(err).splitlines()[0] if str(err) else err!r}"
             self.bench_panel.tree.clear()
-            self.bench_panel.status_label.setStyleSheet("QLabel { color: #b00000; }")
-            self.bench_panel.status_label.setText(f"✗ {line}")
+            self._bench_status(f"✗ {line}", "QLabel { color: #b00000; }")
             self.log(line, "error")
 
         BackgroundCall(self._locked(inst.snapshot), done, name="biafc-gui-snapshot")
@@ -526,6 +591,12 @@ class MainWindow(QMainWindow):
         from protocols.yamlfile import ConfigError
 
         source = self.protocol_path.name if self.protocol_path else "<protocol>"
+        if self.bench_file is None and self._bench_error is not None:
+            # nothing to check it against nor run it on: the bench file's error, not "valid"
+            self.protocol_file, self.plan = None, None
+            self.protocol_panel.show_error(f"no bench to run on: {self._bench_error}")
+            self._set_startable(False)
+            return
         try:
             pf = parse_protocol(text, source)
             proto = pf.protocol
@@ -554,7 +625,7 @@ class MainWindow(QMainWindow):
     def _set_startable(self, ok: bool) -> None:
         """Start and Dry run only with a valid protocol (they only logged a refusal before)."""
         self.run_panel.set_startable(ok)
-        self.protocol_panel.dry_button.setEnabled(ok)
+        self.protocol_panel.dry_button.setEnabled(ok and not self.run_panel.active)
 
     def _f_in(self, pf: Any = None) -> float | None:
         """The input frequency (Hz) the bands view marks: of protocol ``pf`` (default: the
@@ -587,6 +658,9 @@ class MainWindow(QMainWindow):
 
     def dry_run(self) -> None:
         """Validate and report point count, ETA and output path; nothing moves."""
+        if self.run_panel.active:  # the button is disabled meanwhile; a call from code
+            self.log("dry run: a run is active; try again after it ends", "warning")
+            return
         self.protocol_panel.validate_now()
         if self.protocol_file is None or self.plan is None:
             self.log("dry run: the protocol is not valid (see the protocol panel)", "error")
@@ -632,6 +706,10 @@ class MainWindow(QMainWindow):
             return False
         if not isinstance(resume_path, Path):
             resume_path = None  # a clicked() bool
+        if self.bench_file is None and self._bench_error is not None:
+            self.log(f"cannot start: the bench file is not valid: {self._bench_error}", "error")
+            self.run_panel.set_state("idle")
+            return False
         if self._busy:  # the buttons are disabled meanwhile; a call from code is refused
             self.log(f"cannot start yet: {self._busy[0]} is still working on the instruments",
                      "warning")  # fmt: skip
@@ -701,6 +779,8 @@ class MainWindow(QMainWindow):
         adapter.events_ready.connect(self._on_events)
         engine.subscribe(adapter)
         self.engine, self.adapter, self.run_path = engine, adapter, out
+        self.setWindowTitle(f"biafc-lab — {out.name}")  # not a file browsed before the run
+        self._run_open = True
         self.last_result = None
         self.run_panel.progress.setMaximum(engine.plan.n_points)
         self.run_panel.progress.setValue(self.live.n_points)  # a resumed run's points: done
@@ -820,6 +900,7 @@ class MainWindow(QMainWindow):
         from daq.engine.outcome import final_line
 
         status = str(d["status"])
+        self._run_open = False
         self.last_result = self.engine.result if self.engine is not None else None
         self.run_panel.set_state(status)
         level = "info" if status == "complete" else "error"
@@ -840,13 +921,11 @@ class MainWindow(QMainWindow):
         self.run_panel.where_label.setStyleSheet(f"QLabel {{ {style} }}" if style else "")
         if status == "unsafe":
             self.statusBar().showMessage(line)
-            self.bench_panel.status_label.setStyleSheet(
-                "QLabel { color: #b00000; font-weight: bold; }"
-            )
-            self.bench_panel.status_label.setText(
+            self._unsafe_mark = (
                 "✗ UNSAFE: the safe state was not confirmed; switch off by hand what the "
                 "run's last line names"
             )
+            self._bench_status("")
         if self.last_result is not None:  # the process's status is the last run's, as
             from daq.engine.outcome import exit_code  # run_protocol's (0 when it completed)
 
@@ -858,6 +937,9 @@ class MainWindow(QMainWindow):
         detach(getattr(self, "_run_log", None))
         self._run_log = None
         self.run_finished.emit(status)
+        if self._open_after_run is not None:  # promised when it was opened during the run
+            (path, on_done), self._open_after_run = self._open_after_run, None
+            self.open_run_file(path, on_done)
 
     def _show_compile(self, phase: str, elapsed_s: float, folder: str, cold: bool) -> None:
         """The command line's compile notice, in the log and the run panel's line."""
@@ -873,15 +955,27 @@ class MainWindow(QMainWindow):
             self.log(ready_line(elapsed_s))
             self.run_panel.where_label.setText(ready_line(elapsed_s))
 
-    def _clear_unsafe_mark(self) -> None:
-        """Take down the bench panel's "UNSAFE" of an earlier run (once a Safe state has
-        confirmed every output off, or a new run starts): it stayed up until Reconnect."""
+    def _bench_status(self, text: str, style: str = "") -> None:
+        """The bench panel's status line: ``text``, below the "UNSAFE" of an earlier run while
+        that holds (before, Connect's "connecting…", its failure or its success replaced it)."""
         label = self.bench_panel.status_label
-        if label.text().startswith("✗ UNSAFE"):
-            label.setStyleSheet("")
-            name = self.bench_file.bench.name if self.bench_file is not None else "bench"
-            backend = getattr(self.instruments, "backend", "")
-            label.setText(f"{name}: connected ({backend})" if backend else name)
+        if self._unsafe_mark is None:
+            label.setStyleSheet(style)
+            label.setText(text)
+            return
+        label.setStyleSheet("QLabel { color: #b00000; font-weight: bold; }")
+        label.setText(f"{self._unsafe_mark}\n{text}" if text else self._unsafe_mark)
+
+    def _clear_unsafe_mark(self) -> None:
+        """Take down the bench panel's "UNSAFE" of an earlier run: once a Safe state, or the
+        outputs read back after a Reconnect, confirmed every output off (or a new run starts).
+        Before, a Reconnect took it down unchecked, a generator output reported on."""
+        if self._unsafe_mark is None:
+            return
+        self._unsafe_mark = None
+        name = self.bench_file.bench.name if self.bench_file is not None else "bench"
+        backend = getattr(self.instruments, "backend", "")
+        self._bench_status(f"{name}: connected ({backend})" if backend else name)
 
     def _redraw_if_dirty(self) -> None:
         interval = self._pace.tick()
@@ -920,10 +1014,9 @@ class MainWindow(QMainWindow):
                     on_done(False)
                 return
             run, live = result
-            if self.running:
-                self.log("a run is active: the file is shown after it ends", "warning")
-                if on_done:
-                    on_done(False)
+            if self.running:  # read again then: it may be the run's own file
+                self._open_after_run = (p, on_done)
+                self.log(f"a run is active: {p.name} is shown after it ends", "warning")
                 return
             self.live = live
             self.run_path = p
@@ -1007,7 +1100,9 @@ class MainWindow(QMainWindow):
 
     def closeEvent(self, event: QCloseEvent) -> None:
         signum = self._stop_signal
+        self._handle_ended_run()  # a run that ended unhandled: its outcome, not a question
         self._pending_start = self._prefilling = None  # a start under way does not go ahead
+        self._open_after_run = None  # nor a run file waiting to be shown
         if not self.running and signum is not None and self.exit_status != 3:
             self.exit_status = 128 + signum  # idle: the signal's own (an unsafe end's 3 stays)
         if self.running:
@@ -1076,7 +1171,32 @@ class MainWindow(QMainWindow):
         # interpreter's exit crashed the process (exit -11 after a stop signal mid-run)
         for call in list(BackgroundCall._alive):
             call.worker.join(timeout=5.0)
+        self._closed = True
+        if self._busy_connect:  # a connect ended meanwhile: its instruments closed now, not
+            QApplication.processEvents()  # left to an event loop that may not turn again
         event.accept()
+
+
+def _not_confirmed_off(instruments: Any, channels: list[int]) -> list[str]:
+    """What of the bench is not confirmed safe by reading it back, nothing switched: each of
+    the generator's ``channels`` whose output reads on or cannot be read, a stage that moves or
+    does not say (an empty list: every output off, the stage at rest)."""
+    from daq.engine.safe_state import generator_name
+
+    gen = instruments.generator
+    said: list[str] = []
+    for ch in channels:
+        try:
+            if gen.output_state(ch):
+                said.append(f"{generator_name(gen)} output {ch} is ON")
+        except Exception as exc:
+            said.append(f"{generator_name(gen)} output {ch}: cannot read it back ({exc})")
+    try:
+        if instruments.stage.is_moving():
+            said.append("stage controller: the axis moves")
+    except Exception as exc:
+        said.append(f"stage: cannot read whether it moves ({exc})")
+    return said
 
 
 #: the run panel's line while a run is paused

@@ -26,6 +26,7 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
+from daq.gui.views import amplitude_text
 from daq.progress import format_duration
 
 __all__ = ["BenchPanel", "LogView", "ProtocolPanel", "RunPanel", "format_duration"]
@@ -250,6 +251,11 @@ class RunPanel(QGroupBox):
         self._startable = startable
         self.set_state(self._state)
 
+    @property
+    def active(self) -> bool:
+        """A run starts, runs or is paused."""
+        return self._state in ("running", "paused", "starting")
+
     def set_state(self, state: str) -> None:
         """Enable the buttons that make sense in engine state ``state``."""
         self._state = state
@@ -267,8 +273,7 @@ class RunPanel(QGroupBox):
         self.progress.setMaximum(int(d["total"]))
         self.progress.setValue(int(d["done"]))
         amp = float(d.get("amplitude", float("nan")))
-        units = str(d.get("amplitude_units", ""))
-        amp_text = f"{amp * 1e6:.3g} um" if units == "m" else f"{amp:.3g} Vpp"
+        amp_text = amplitude_text(amp, str(d.get("amplitude_units", "")))
         self.where_label.setText(
             f"{d['direction']}  ·  amplitude {amp_text}  ·  cylinder {d['cylinder']}"
             f"  ·  elapsed {format_duration(d['elapsed_s'])}  ·  ETA {format_duration(d['eta_s'])}"

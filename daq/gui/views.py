@@ -11,6 +11,7 @@ import pyqtgraph as pg
 from numpy.typing import NDArray
 from PySide6.QtWidgets import QCheckBox, QComboBox, QHBoxLayout, QTabWidget, QWidget
 
+from analysis.display import amplitude_scale
 from daq.gui import refcount_guard
 from daq.gui.decimate import minmax_decimate
 from daq.gui.live_data import LiveData, ScanView, Trace
@@ -43,9 +44,22 @@ def _failed_marks(plot: pg.PlotWidget) -> pg.ScatterPlotItem:
     return marks
 
 
-def _amp_text(amplitude: float, units: str) -> str:
-    """A drive amplitude as the views show it: um for a displacement (m), else Vpp."""
-    return f"{amplitude * 1e6:.3g} um" if units == "m" else f"{amplitude:.3g} Vpp"
+def amplitude_scale_text(values: Any, units: str) -> tuple[float, str]:
+    """``(factor, unit)`` to show drive amplitudes in ``units`` (a run file's, a plan's): the
+    generator's volts as Vpp, a displacement (m) or a force (N) with a readable prefix
+    (:func:`analysis.display.amplitude_scale`, "u" for micro as the window writes it). Before,
+    every unit but m read Vpp: a 12 N force run was labelled 12 Vpp."""
+    if units == "V":  # the generator's peak-to-peak volts
+        return 1.0, "Vpp"
+    factor, unit = amplitude_scale(values, units)
+    return factor, unit.replace("µ", "u")
+
+
+def amplitude_text(amplitude: float, units: str) -> str:
+    """A drive amplitude with its unit, e.g. ``2e-6, "m"`` -> ``"2 um"``, ``12, "N"`` ->
+    ``"12 N"``, ``1, "V"`` -> ``"1 Vpp"``."""
+    factor, unit = amplitude_scale_text([amplitude], units)
+    return f"{amplitude / factor:.3g} {unit}".rstrip()
 
 
 _MODEL_PEN = pg.mkPen((0, 0, 0), width=1.5, style=pg.QtCore.Qt.PenStyle.DashLine)
@@ -87,9 +101,8 @@ class TraceView(pg.GraphicsLayoutWidget):
         xd, yd = minmax_decimate(t_ms, tr.drive)
         self.c_drv.setData(xd, yd)
         self.p_drv.setLabel("left", f"drive ({tr.drive_units})")
-        amp = f"{tr.amplitude * (1e6 if tr.amplitude_units == 'm' else 1):.3g}"
-        unit = "um" if tr.amplitude_units == "m" else "Vpp"
-        self.p_vel.setTitle(f"{tr.direction}  amplitude {amp} {unit}  cylinder {tr.cylinder}")
+        amp = amplitude_text(tr.amplitude, tr.amplitude_units)
+        self.p_vel.setTitle(f"{tr.direction}  amplitude {amp}  cylinder {tr.cylinder}")
         self.n_drawn = int(x.size)
 
 
@@ -143,7 +156,8 @@ class SpectrumView(pg.PlotWidget):
             self.band.setRegion((onset[i, b] / 1e3, cutoff[i, b] / 1e3))
             self.band.show()
         self.setTitle(
-            f"spectrum: {tr.direction}, amplitude {_amp_text(tr.amplitude, tr.amplitude_units)}"
+            f"spectrum: {tr.direction}, "
+            f"amplitude {amplitude_text(tr.amplitude, tr.amplitude_units)}"
             f", cylinder {tr.cylinder} (band shaded)"
         )
         self.n_drawn = int(np.count_nonzero(np.isfinite(mag)))
@@ -249,7 +263,7 @@ class SpatialMapView(pg.PlotWidget):
         failed = f", {self.n_failed} failed: red x" if self.n_failed else ""
         self.setTitle(
             f"spatial-frequency map: {scan.direction}, "
-            f"{_amp_text(float(scan.amplitudes[ai]), scan.amplitude_units)} "
+            f"{amplitude_text(float(scan.amplitudes[ai]), scan.amplitude_units)} "
             f"({self.n_rows}/{len(scan.cylinders)} cylinders{failed})"
         )
 
@@ -349,10 +363,9 @@ class SweepView(pg.PlotWidget):
         self.image.setRect(pg.QtCore.QRectF(0.5, -0.5, n_c, n_a))
         cyl = scan.cylinders[order]
         self.getAxis("bottom").setTicks([[(k + 1, str(int(c))) for k, c in enumerate(cyl)]])
-        scale = 1e6 if scan.amplitude_units == "m" else 1.0
-        unit = "um" if scan.amplitude_units == "m" else "Vpp"
+        factor, unit = amplitude_scale_text(scan.amplitudes, scan.amplitude_units)
         self.getAxis("left").setTicks(
-            [[(k, f"{v * scale:.3g} {unit}") for k, v in enumerate(scan.amplitudes)]]
+            [[(k, f"{v / factor:.3g} {unit}") for k, v in enumerate(scan.amplitudes)]]
         )
         self.setLabel("left", "amplitude")
         failed = f"; {self.n_failed} failed: red x" if self.n_failed else ""
@@ -464,7 +477,7 @@ class LiveViews(QTabWidget):
     def _update_choices(self, data: LiveData) -> None:
         """One entry per direction and amplitude of ``data``, after "following the run"."""
         wanted = [
-            (f"{d} {_amp_text(float(a), scan.amplitude_units)}", (d, ai))
+            (f"{d} {amplitude_text(float(a), scan.amplitude_units)}", (d, ai))
             for d, scan in data.scans.items()
             for ai, a in enumerate(scan.amplitudes)
         ]

@@ -142,3 +142,39 @@ def test_a_failed_point_measured_on_resume_is_no_longer_counted(qtbot: Any) -> N
     assert live.n_failed == 2
     live.add_point(_big_point())  # the resume measured cylinder 1 after all
     assert live.n_failed == 1
+
+
+def test_a_force_driven_run_is_labelled_in_newtons(qtbot: Any) -> None:
+    """A `biafc simulate --amplitude 12N` file (amplitudes in N) was labelled Vpp everywhere:
+    anything not "m" was taken for the generator's volts."""
+    from daq.gui.panels import RunPanel
+
+    views = LiveViews()
+    qtbot.addWidget(views)
+    live = LiveData()
+    live.scans["ltr"] = ScanView.empty(
+        "ltr", 8.92e3, np.array([0.5, 12.0]), "N", np.array([1, 2], np.int32), 30_000, 1e6
+    )
+    for ai, amp in ((0, 0.5), (1, 12.0)):
+        live.add_point({**_big_point(), "amplitude_index": ai, "amplitude": amp,
+                        "amplitude_units": "N"})  # fmt: skip
+    views.redraw(live)
+    titles = [
+        views.trace.p_vel.titleLabel.text,
+        views.spectrum.plotItem.titleLabel.text,
+        views.spatial.plotItem.titleLabel.text,
+    ]
+    assert all("12 N" in t and "Vpp" not in t for t in titles), titles
+    ticks = [t for _, t in views.sweep.getAxis("left")._tickLevels[0]]
+    assert ticks == ["0.5 N", "12 N"], ticks
+    texts = [views.map_choice.itemText(i) for i in range(views.map_choice.count())]
+    assert texts[1:] == ["ltr 500 mN", "ltr 12 N"]
+    panel = RunPanel()
+    qtbot.addWidget(panel)
+    progress = {"total": 2, "done": 1, "amplitude": 12.0, "amplitude_units": "N"}
+    panel.show_progress({**progress, "direction": "ltr", "cylinder": 1, "elapsed_s": 1.0,
+                         "eta_s": 1.0})  # fmt: skip
+    assert "amplitude 12 N" in panel.where_label.text()
+    from daq.gui.views import amplitude_text
+
+    assert amplitude_text(1.0, "V") == "1 Vpp" and amplitude_text(2e-6, "m") == "2 um"
