@@ -367,6 +367,16 @@ def _setting_value(text: str, source: str) -> Any:
         return text.strip()
 
 
+def _groups_holding(key: str) -> list[str]:
+    """Names of the chain's groups of settings (``damping``, ``material``) that hold ``key``."""
+    out = []
+    for name, info in ChainSpec.model_fields.items():
+        ann = info.annotation
+        if isinstance(ann, type) and issubclass(ann, BaseModel) and key in ann.model_fields:
+            out.append(name)
+    return out
+
+
 def apply_settings(
     data: dict[str, Any], settings: list[str] | tuple[str, ...], source: str = "--set"
 ) -> dict[str, Any]:
@@ -381,6 +391,13 @@ def apply_settings(
         if not sep or not key or not text.strip():
             raise ChainFileError(f"{source} {item!r}: write KEY=VALUE, e.g. diameter=12mm")
         value = _setting_value(text, f"{source} {key}")
+        if "." not in key and key not in ChainSpec.model_fields:
+            groups = _groups_holding(key)
+            if groups:  # the generic near-name hint would name an unrelated top-level key
+                dotted = " or ".join(f"{g}.{key}" for g in groups)
+                raise ChainFileError(
+                    f"{source} {item!r}: {key} is a setting inside a group; write {dotted}"
+                )
         parts = key.split(".")
         target = out
         for part in parts[:-1]:

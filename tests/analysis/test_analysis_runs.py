@@ -211,6 +211,8 @@ def test_cli_writes_figures_and_summary(tmp_path: Path, capsys) -> None:  # type
         (["figures", "--alpha-sweep", "--alphas", "-0.1"], "--alphas"),
         (["figures", "--alpha-sweep", "--duration", "8"], "--duration"),
         (["figures", "--alpha-sweep", "--cycles", "0"], "--cycles"),
+        (["figures", "--alpha-sweep", "--linear-reference", "3kHz"], "--linear-reference"),
+        (["figures", "X.h5", "--linear-reference", "10nm"], "--linear-reference applies only"),
     ],
 )
 def test_cli_user_errors_are_one_line(argv: list[str], message: str, capsys) -> None:  # type: ignore[no-untyped-def]
