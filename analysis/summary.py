@@ -136,6 +136,7 @@ def summary_rows(sweep: AmplitudeSweep, scan: ScanData | None = None) -> list[di
                 "output_Hz": _num(sweep.output_Hz[a]),
                 "detuning_Hz": _num(sweep.detuning_Hz[a]),
                 "transmission": _num(sweep.transmission[a]),
+                "signal_transmission": _num(sweep.signal_transmission[a]),
                 "transmission_gain": _num(sweep.transmission_gain[a]),
                 "gain_is_lower_bound": bool(sweep.reference_is_bound),
                 "far_noise_ratio": _num(sweep.far_noise_ratio[a]),
@@ -205,30 +206,37 @@ def format_summary(summary: dict[str, Any]) -> str:
             if c["failed"] or c["pending"]
         ),
         f"{'dir':4} {'amplitude':>12} {'f_in kHz':>9} {'f_out kHz':>9} {'detune kHz':>10} "
-        f"{'expect kHz':>10} {'E_far/E_in':>10} {'gain':>7}  conversion",
+        f"{'expect kHz':>10} {'E_far/E_in':>10} {'E_sig/E_in':>10} {'gain':>7}  conversion",
     ]
     for r in summary["rows"]:
         tr = "-" if r["transmission"] is None else f"{r['transmission']:.3g}"
+        sig = r.get("signal_transmission")
+        signal = "-" if sig is None or r["transmission"] is None else f"{sig:.3g}"
         if r.get("at_noise_floor") and r.get("transmission_upper_bound") is not None:
-            tr = f"<{r['transmission_upper_bound']:.3g}"
+            signal = f"<{r['transmission_upper_bound']:.3g}"
         gain = "-" if r["transmission_gain"] is None else f"{r['transmission_gain']:.3g}"
         if r["transmission_gain"] is not None and r.get("gain_is_lower_bound"):
             gain = f">={r['transmission_gain']:.3g}"
         amp = amplitude_label(r["amplitude"], r["amplitude_units"])
         lines.append(
             f"{r['direction']:4} {amp:>12} {khz(r['input_Hz']):>9} {khz(r['output_Hz']):>9} "
-            f"{khz(r['detuning_Hz']):>10} {khz(r['expected_output_Hz']):>10} {tr:>10} {gain:>7}  "
-            f"{r['conversion']}"
+            f"{khz(r['detuning_Hz']):>10} {khz(r['expected_output_Hz']):>10} {tr:>10} "
+            f"{signal:>10} {gain:>7}  {r['conversion']}"
+        )
+    bands = ", ".join(
+        f"{d} {lo / 1e3:.2f}-{hi / 1e3:.2f} kHz"
+        for d, (lo, hi) in summary.get("noise_band_Hz", {}).items()
+    )
+    if summary["rows"]:
+        lines.append(
+            "E_far/E_in: the far end's energy over the entry's, whole records (noise included); "
+            f"E_sig/E_in: the far end's signal, its energy in the band where it can be ({bands}) "
+            "less its pre-trigger noise's there; the gains are of E_sig"
         )
     if any(r.get("at_noise_floor") for r in summary["rows"]):
-        bands = ", ".join(
-            f"{d} {lo / 1e3:.2f}-{hi / 1e3:.2f} kHz"
-            for d, (lo, hi) in summary.get("noise_band_Hz", {}).items()
-        )
         lines.append(
             "<x: the far end held less than 4x the energy its own pre-trigger noise gives "
-            f"within the band where the signal can be ({bands}); the ratio is at most x (the "
-            "far end's energy in that band over E_in) and no output peak is given"
+            "within that band; its signal is at most x and no output peak is given"
         )
     if any(r.get("gain_is_lower_bound") for r in summary["rows"]):
         lines.append(

@@ -42,7 +42,14 @@ from analysis.bands import (
     peak_search_range_Hz,
     signal_band_Hz,
 )
-from analysis.noise_floor import RESOLVED_FACTOR, band_energy, band_noise_energy, resolved
+from analysis.noise_floor import (
+    MIN_BAND_DOF,
+    RESOLVED_FACTOR,
+    band_dof,
+    band_energy,
+    band_noise_energy,
+    resolved,
+)
 from analysis.spectra import amplitude_spectrum, peak_frequency
 from analysis.transmission import energy_transmission, signal_energy
 from protocols.runfile import ChainInfo, ScanData
@@ -164,11 +171,14 @@ def amplitude_sweep(scan: ScanData, chain: ChainInfo) -> AmplitudeSweep:
     sig_band = signal_band_Hz(
         scan.f_center_Hz, scan.direction, onset, cutoff, burst_sigma_f_Hz(scan)
     )
+    level_band = f_range
+    if band_dof(scan.time_s, rate, level_band) < MIN_BAND_DOF:  # a short pre-trigger: the
+        sig_band = level_band = (0.0, rate / 2.0)  # whole record decides, as before
     e_far = band_energy(v_far, rate, sig_band)  # for the noise floor and its bound
     e_entry = signal_energy(v_entry, rate)
     far_measured = np.all(np.isfinite(v_far), axis=-1)
     with np.errstate(divide="ignore", invalid="ignore"):
-        noise = band_noise_energy(v_far, scan.time_s, rate, sig_band, f_range)
+        noise = band_noise_energy(v_far, scan.time_s, rate, sig_band, level_band)
         noise_ratio = np.where(noise > 0, e_far / noise, np.where(noise == 0, np.inf, np.nan))
         # the far record alone decides (its entry point may have failed)
         floor = far_measured & ~resolved(e_far, noise)
