@@ -173,16 +173,26 @@ def _write(report: CompareReport, run: RunData, out: Path) -> None:
     report.csv_path = out / "residuals.csv"
     with report.csv_path.open("w", newline="") as fh:
         w = csv.writer(fh)
-        w.writerow(["cylinder", "points", "spectral_residual", "time_residual", "noise_floor"])
-        for c, n, s, t, f in zip(
+        w.writerow(
+            [
+                "cylinder",
+                "points",
+                "spectral_residual",
+                "time_residual",
+                "noise_floor",
+                "spectral_noise_floor",
+            ]
+        )
+        for c, n, s, t, f, sn in zip(
             cmp.cylinders,
             cmp.n_points,
             cmp.spectral_residual,
             cmp.time_residual,
             cmp.noise_residual,
+            cmp.spectral_noise_per_cylinder(),
             strict=True,
         ):
-            w.writerow([int(c), int(n), _fmt(s), _fmt(t), _fmt(f)])
+            w.writerow([int(c), int(n), _fmt(s), _fmt(t), _fmt(f), _fmt(sn)])
     summary: dict[str, Any] = cmp.as_dict()
     s = report.setup
     summary["run_file"] = run.path.name
@@ -201,6 +211,7 @@ def _write(report: CompareReport, run: RunData, out: Path) -> None:
             st: int(np.count_nonzero(dc.state == st))
             for st in ("ok", "clipped", "failed", "pending")
         }
+        | {"far_at_noise_floor": int(np.count_nonzero(dc.at_noise_floor))}
         for d, dc in cmp.directions.items()
     }
     report.json_path = out / "comparison.json"

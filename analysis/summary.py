@@ -49,8 +49,10 @@ __all__ = [
     "TRANSMISSION_MIN",
     "conversion_verdict",
     "format_summary",
+    "is_conversion",
     "summarize",
     "summary_rows",
+    "verdict_reason",
     "write_summary",
 ]
 
@@ -75,6 +77,42 @@ def conversion_verdict(
     if not passes or abs(detuning_Hz) < DETUNING_MIN_FRACTION * input_Hz:
         return "none"
     return "down" if detuning_Hz < 0 else "up"
+
+
+def is_conversion(verdict: str) -> bool:
+    """Whether a summary row's ``conversion`` verdict is a conversion (``"down"``/``"up"``)."""
+    return verdict in ("down", "up")
+
+
+def verdict_reason(row: dict[str, Any]) -> str:
+    """The verdict of a :func:`summary_rows` row in words, with the numbers that decided it, to
+    print beside its output line: ``"not converted: E_far/E_in 7.1e-08 is below 0.01, ..."``.
+    With a single amplitude there is no linear reference: the rule is then the level alone, and
+    the text says so (whether a line that fails it is the chain's linear leak cannot be told
+    from one run)."""
+    verdict = str(row["conversion"])
+    t, g = row.get("transmission"), row.get("transmission_gain")
+    f_in, det = row.get("input_Hz"), row.get("detuning_Hz")
+    if row.get("at_noise_floor"):
+        return "not converted: the far end is at the noise floor"
+    if t is None or f_in is None or det is None or verdict not in ("down", "up", "none"):
+        return verdict
+    moved = f"|detuning| {abs(det) / f_in:.1%} of f_in"
+    if g is not None:
+        bound = ">=" if row.get("gain_is_lower_bound") else ""
+        energy = f"gain {bound}{g:.3g} over the linear reference"
+        passes, need, rule = g >= GAIN_MIN, f"{GAIN_MIN:g}", ""
+    else:
+        energy = f"E_far/E_in {t:.3g}"
+        passes, need = t >= TRANSMISSION_MIN, f"{TRANSMISSION_MIN:g}"
+        rule = " (one amplitude: no linear reference, the level alone decides)"
+    if is_conversion(verdict):
+        return (
+            f"converted {verdict}: {energy} >= {need}{rule}, {moved} >= {DETUNING_MIN_FRACTION:.0%}"
+        )
+    if not passes:
+        return f"not converted: {energy}, below {need}{rule}"
+    return f"not converted: {moved}, below {DETUNING_MIN_FRACTION:.0%}"
 
 
 def _num(x: float) -> float | None:

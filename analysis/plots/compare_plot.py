@@ -126,6 +126,8 @@ def plot_compare_spectra(dc: DirectionComparison) -> Figure:
             ax.axvline(ms.expected_Hz / 1e3, color=colour, ls=":", lw=1)
             label = amplitude_label(float(ms.amplitudes[a]), ms.amplitude_units)
             st = str(far_state[a])
+            if st == "ok" and ms.at_noise_floor[a]:
+                st = "at the noise floor"
             ax.set_title(f"{label}" + ("" if st == "ok" else f" ({st})"), fontsize=9)
             if a // cols == rows - 1:
                 ax.set_xlabel("frequency (kHz)")
@@ -139,7 +141,14 @@ def plot_compare_spectra(dc: DirectionComparison) -> Figure:
 def plot_compare_sweep(cmp: Comparison) -> Figure:
     """Energy transmission (far / entry cylinder) and the far cylinder's spectral peak against
     amplitude, both directions: measured markers, model lines; amplitudes whose entry or far
-    point is failed, clipped or not measured get the state's marker instead."""
+    point is failed, clipped or not measured get the state's marker instead.
+
+    The transmission is the far end's signal, as the regime figure's: where the measured far
+    record's noise is known, its energy in the band where the signal can be less the noise's
+    there (``signal_transmission``), and the model's in the same band
+    (``predicted_signal``). A far record at the noise floor is a downward triangle at its
+    upper bound (``transmission_bound``): before, its whole record's E_far/E_entry, the noise's,
+    was drawn as measured (1.2e-2 at 10 nm against the model's 8e-5)."""
     with style():
         fig, axs = new_figure(1, 2, figsize=(11.0, 4.2))
         ax_t, ax_f = axs[0, 0], axs[0, 1]
@@ -149,14 +158,18 @@ def plot_compare_sweep(cmp: Comparison) -> Figure:
             factor, unit = amplitude_scale(ms.amplitudes, ms.amplitude_units)
             x = ms.amplitudes / factor
             st = dc.sweep_state()
-            good = st == "ok"
+            floor = (st == "ok") & ms.at_noise_floor
+            good = (st == "ok") & ~floor
+            t_meas, t_model = ms.signal_transmission, dc.predicted_signal
             # a line and small dots: one amplitude is a line through one point, which drew
             # nothing though the legend named it
-            ax_t.plot(x, ps.transmission, ".-", color=colour, lw=1.2, ms=4,
+            ax_t.plot(x, t_model, ".-", color=colour, lw=1.2, ms=4,
                       label=f"{d.upper()} model")  # fmt: skip
-            ax_t.plot(
-                x[good], ms.transmission[good], "o", color=colour, label=f"{d.upper()} measured"
-            )
+            ax_t.plot(x[good], t_meas[good], "o", color=colour, label=f"{d.upper()} measured")
+            if np.any(floor):
+                ax_t.plot(x[floor], ms.transmission_bound[floor], "v", color=colour, mfc="none",
+                          ms=8, ls="none",
+                          label=f"{d.upper()} at the noise floor (at most)")  # fmt: skip
             ax_f.plot(x, ps.output_Hz / 1e3, ".-", color=colour, lw=1.2, ms=4,
                       label=f"{d.upper()} model")  # fmt: skip
             ax_f.plot(
@@ -165,8 +178,7 @@ def plot_compare_sweep(cmp: Comparison) -> Figure:
             for name, (marker, mc) in BAD_MARK.items():  # unscanned: nothing to mark
                 sel = st == name
                 if np.any(sel):
-                    yt = np.where(np.isfinite(ms.transmission[sel]), ms.transmission[sel], np.nan)
-                    yt = np.where(np.isfinite(yt), yt, ps.transmission[sel])
+                    yt = np.where(np.isfinite(t_meas[sel]), t_meas[sel], t_model[sel])
                     ax_t.plot(x[sel], yt, marker, color=mc, ms=8, ls="none", label=SHOWN[name])
                     yf = np.where(
                         np.isfinite(ms.output_Hz[sel]), ms.output_Hz[sel], ps.output_Hz[sel]
@@ -192,11 +204,18 @@ def plot_compare_sweep(cmp: Comparison) -> Figure:
                 ax.set_xlim(xs_all.min() / 1.3, xs_all.max() * 1.3)
             handles, labels = ax.get_legend_handles_labels()
             uniq = dict(zip(labels, handles, strict=True))
-            ax.legend(uniq.values(), uniq.keys(), fontsize=8)
+            where = "lower right" if ax is ax_t else "best"  # clear of the low bounds
+            ax.legend(uniq.values(), uniq.keys(), fontsize=8, loc=where)
         ys = [
             y
             for dc in cmp.directions.values()
-            for y in (dc.measured_sweep.transmission, dc.predicted_sweep.transmission)
+            for y in (
+                np.where(
+                    dc.measured_sweep.at_noise_floor, np.nan, dc.measured_sweep.signal_transmission
+                ),
+                dc.measured_sweep.transmission_bound,
+                dc.predicted_signal,
+            )
         ]
         pos = np.concatenate([y[np.isfinite(y) & (y > 0)] for y in ys])
         if pos.size:
@@ -206,9 +225,12 @@ def plot_compare_sweep(cmp: Comparison) -> Figure:
             ax_t.text(
                 0.5, 0.5, "entry or far cylinder not scanned", ha="center", transform=ax_t.transAxes
             )
-        ax_t.set_ylabel("energy transmission E_far / E_entry")
+        ax_t.set_ylabel("far-end signal energy / E_entry")
         ax_f.set_ylabel("far-cylinder peak (kHz)")
-        ax_t.set_title("transmission against amplitude")
+        ax_t.set_title(
+            "transmission against amplitude\n(far end in its signal band, noise removed)",
+            fontsize=10,
+        )
         ax_f.set_title("far-end peak against amplitude (dotted: band edge)")
     return fig
 
@@ -221,6 +243,9 @@ def plot_compare_residuals(cmp: Comparison) -> Figure:
         x = cmp.cylinders.astype(float)
         ax.bar(x - 0.2, cmp.spectral_residual, width=0.4, label="spectral", color="tab:blue")
         ax.bar(x + 0.2, cmp.time_residual, width=0.4, label="time domain", color="tab:grey")
+        sn = cmp.spectral_noise_per_cylinder()
+        if np.any(np.isfinite(sn)):
+            ax.plot(x - 0.2, sn, "_", color="navy", ms=8, mew=2, label="spectral: noise alone")
         if np.any(np.isfinite(cmp.noise_residual)):
             ax.plot(x, cmp.noise_residual, "k_", ms=10, mew=2, label="noise floor")
         ax.axhline(1.0, color="k", ls=":", lw=1, label="predicting nothing")
@@ -242,9 +267,14 @@ def plot_compare_residuals(cmp: Comparison) -> Figure:
         ax.set_xlabel("cylinder number")
         ax.set_ylabel("relative residual (RMS)")
         fom = cmp.figure_of_merit
-        ax.set_title(
-            "residual per cylinder; figure of merit "
-            + (f"{fom:.3f}" if math.isfinite(fom) else "n/a")
+        title = "residual per cylinder; figure of merit " + (
+            f"{fom:.3f}" if math.isfinite(fom) else "n/a"
         )
+        if math.isfinite(cmp.spectral_noise_figure):
+            title += f" (noise alone {cmp.spectral_noise_figure:.3f})"
+        if cmp.n_noise_floor:
+            n = cmp.n_noise_floor
+            title += f"\n{n} far record{'' if n == 1 else 's'} at the noise floor not compared"
+        ax.set_title(title, fontsize=10)
         ax.legend(fontsize=8)
     return fig

@@ -10,7 +10,9 @@ The amplitude's unit picks the drive: a length (``2 um``) is the peak displaceme
 actuator, a moving Hertz wall; a force (``12 N``) is the peak force on the end cylinder. The run
 is written in the run-file layout (backend ``"dem"``, one amplitude, every cylinder done) and a
 summary is printed: the transmitted energy ratio (far-end over entry cylinder) and the far end's
-spectral peak.
+spectral peak, with the conversion verdict beside it (:func:`analysis.summary.verdict_reason`:
+one run has no linear reference, so E_far/E_in must reach 1e-2; the far end always has a
+largest line, a linear leak's too).
 """
 
 from __future__ import annotations
@@ -257,11 +259,15 @@ def run(args: argparse.Namespace) -> int:
     except BaseException:
         writer.close("failed")
         raise
+    from analysis.summary import summary_rows, verdict_reason
     from analysis.sweep import amplitude_sweep, output_peak_definition
     from protocols.runfile import read_run
 
     stored = read_run(args.out)
     sweep = amplitude_sweep(stored.scans[args.direction], stored.chain)
+    # the largest far-end line is there whether or not anything converted: the verdict
+    # (analysis.summary's rule for one amplitude) goes beside it
+    verdict = verdict_reason(summary_rows(sweep, stored.scans[args.direction])[0])
     step = "" if simulation["order"] == 0 else f" dt = {simulation['dt_s'] * 1e6:.3g} us"
     lost = "dissipated by the damping" if chain.damped else "the integrator's energy error"
     print(
@@ -282,7 +288,7 @@ def run(args: argparse.Namespace) -> int:
     print(
         f"{output_peak_definition(sweep)}: {float(sweep.output_Hz[0]) / 1e3:.3f} kHz "
         f"(input {float(sweep.input_Hz[0]) / 1e3:.3f} kHz, detuning "
-        f"{float(sweep.detuning_Hz[0]) / 1e3:+.3f} kHz)"
+        f"{float(sweep.detuning_Hz[0]) / 1e3:+.3f} kHz; {verdict})"
     )
     print(
         f"far/near rms ratio (cylinder {sweep.far} / cylinder {sweep.entry}): "

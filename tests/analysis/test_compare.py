@@ -296,3 +296,63 @@ def test_the_high_amplitude_map_is_the_highest_measured(
     monkeypatch.setattr(cp, "plot_compare_spatial", keep)
     compare_run(read_run(part), tmp_path / "cmp")
     assert titles and all("20 nm" in t for t in titles), titles
+
+
+def test_far_records_at_the_noise_floor_are_bounds_not_compared(tmp_path: Path) -> None:
+    """A simulated ``biafc_sweep`` run compared with its own chain drew the far end's noise as
+    measured (E_far/E_entry 1.2e-2 at 10 nm against the model's 8e-5), and its figure of merit
+    (0.220) counted those noise records and had no noise reference to read it against."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from analysis.plots.compare_plot import plot_compare_sweep
+
+    scan = write_synthetic_scan(  # 2 nm: the far ends hold only the noise
+        tmp_path / "noisy.h5",
+        true_spec=default_chain_spec(),
+        amplitudes_m=(2e-9, 2e-6),
+        cylinders=CYL,
+        duration_s=8e-3,
+        noise_m_per_s=1e-5,
+    )
+    report = compare_run(read_run(scan), tmp_path / "cmp")
+    cmp = report.comparison
+    n_floor = 0
+    kept: list[float] = []
+    for dc in cmp.directions.values():
+        ms = dc.measured_sweep
+        far = list(dc.cylinders).index(ms.far)
+        assert ms.at_noise_floor[0] and not ms.at_noise_floor[-1]  # 2 nm: noise; 2 um: not
+        assert list(dc.at_noise_floor[:, far]) == list(ms.at_noise_floor)
+        assert not np.delete(dc.at_noise_floor, far, axis=1).any()
+        n_floor += int(ms.at_noise_floor.sum())
+        kept += list(dc.spectral_residual[(dc.state == "ok") & ~dc.at_noise_floor])
+        # the model's far end set like against like: within the signal band, as measured
+        assert np.all(dc.predicted_signal[ms.at_noise_floor] <= ms.transmission_bound[0])
+    assert cmp.n_noise_floor == n_floor == 2
+    assert int(cmp.n_points.sum()) == cmp.counts["ok"] - n_floor
+    assert cmp.figure_of_merit == pytest.approx(np.sqrt(np.mean(np.square(kept))))
+    # the true model: its figure of merit is what the noise alone gives
+    assert 0.0 < cmp.spectral_noise_figure
+    assert cmp.figure_of_merit < 1.5 * cmp.spectral_noise_figure + 0.02
+    text = report.text()
+    assert f"{n_floor} far records at the noise floor" in text and "noise alone" in text
+    summary = json.loads((tmp_path / "cmp" / "comparison.json").read_text())
+    assert summary["far_records_at_noise_floor"] == n_floor
+    assert summary["figure_of_merit_noise_floor"] == pytest.approx(cmp.spectral_noise_figure)
+    fig = plot_compare_sweep(cmp)
+    ax_t = fig.axes[0]
+    for d, dc in cmp.directions.items():
+        ms = dc.measured_sweep
+        bounds = [
+            ln for ln in ax_t.lines if ln.get_label() == f"{d.upper()} at the noise floor (at most)"
+        ]
+        assert len(bounds) == 1 and bounds[0].get_marker() == "v"
+        assert np.allclose(bounds[0].get_ydata(), ms.transmission_bound[ms.at_noise_floor])
+        (meas,) = [ln for ln in ax_t.lines if ln.get_label() == f"{d.upper()} measured"]
+        assert np.size(meas.get_xdata()) == int(
+            (~ms.at_noise_floor & (dc.sweep_state() == "ok")).sum()
+        )
+    plt.close(fig)
