@@ -786,7 +786,9 @@ class MainWindow(QMainWindow):
         self.run_panel.progress.setValue(self.live.n_points)  # a resumed run's points: done
         self.run_panel.set_state("running")
         self.run_panel.where_label.setStyleSheet("")  # a refusal's red, before this run
-        self._clear_unsafe_mark()
+        # an earlier run's UNSAFE stays up through this one: only its end, reading every output
+        # back off and the stage at rest, takes it down (:meth:`_finished`); before, Start took
+        # it down unchecked
         from daq.logsetup import detach, hold_run_log
 
         detach(getattr(self, "_run_log", None))
@@ -921,11 +923,23 @@ class MainWindow(QMainWindow):
         self.run_panel.where_label.setStyleSheet(f"QLabel {{ {style} }}" if style else "")
         if status == "unsafe":
             self.statusBar().showMessage(line)
-            self._unsafe_mark = (
-                "✗ UNSAFE: the safe state was not confirmed; switch off by hand what the "
-                "run's last line names"
+            from daq.engine.outcome import unsafe_instruction
+
+            unconfirmed = list(d.get("unconfirmed") or [])
+            # what to switch off named here: a next run replaces the run's last line
+            self._unsafe_mark = f"✗ UNSAFE: the safe state of {Path(d['path']).name} was not " + (
+                f"confirmed; {unsafe_instruction(unconfirmed)}"
+                if unconfirmed
+                else "confirmed; switch off by hand what the run's last line names"
             )
             self._bench_status("")
+        elif self._unsafe_mark is not None and d.get("safe_state_s") is not None:
+            # this run's end read every output back off and the stage at rest
+            self.log(
+                "the earlier run's UNSAFE is taken down: this run's end read every output back "
+                "off and the stage at rest"
+            )
+            self._clear_unsafe_mark()
         if self.last_result is not None:  # the process's status is the last run's, as
             from daq.engine.outcome import exit_code  # run_protocol's (0 when it completed)
 
@@ -967,9 +981,10 @@ class MainWindow(QMainWindow):
         label.setText(f"{self._unsafe_mark}\n{text}" if text else self._unsafe_mark)
 
     def _clear_unsafe_mark(self) -> None:
-        """Take down the bench panel's "UNSAFE" of an earlier run: once a Safe state, or the
-        outputs read back after a Reconnect, confirmed every output off (or a new run starts).
-        Before, a Reconnect took it down unchecked, a generator output reported on."""
+        """Take down the bench panel's "UNSAFE" of an earlier run: once a Safe state, the
+        outputs read back after a Reconnect, or a later run's end confirmed every output off
+        and the stage at rest. Before, a Reconnect, and the start of a run, took it down
+        unchecked, a generator output reported on."""
         if self._unsafe_mark is None:
             return
         self._unsafe_mark = None
