@@ -339,14 +339,28 @@ class MainWindow(QMainWindow):
         try:
             bf = load_bench(path)
         except (ConfigError, OSError) as exc:
+            if self.bench_file is not None:  # refused: the bench loaded stays, and is said
+                # (before, the panel kept its path while the line showed the new file's error)
+                old = self.bench_file.bench.name
+                state = (
+                    f"connected ({self.instruments.backend})"
+                    if self.instruments is not None
+                    else "not connected"
+                )
+                where = self.bench_panel.path_edit.text()
+                line = f"bench file refused: {exc}; still using {old!r} ({where}, {state})"
+                self._bench_status(f"✗ {line}", "QLabel { color: #b00000; }")
+                self.log(line, "error")
+                return False
             self._bench_status(f"✗ {exc}")
             self.log(str(exc), "error")
-            if self.bench_file is None:  # no bench to connect to or to run on: said as such
-                self._bench_error = str(exc)  # (before, the protocol read valid, Start was
-                self.bench_panel.connect_button.setEnabled(False)  # on, Connect silent)
-                self.bench_panel.path_edit.setText(shown_path(path) if path is not None else "")
-                if self.protocol_panel.editor.toPlainText().strip():
-                    self.protocol_panel.validate_now()
+            # no bench to connect to or to run on: said as such (before, the protocol read
+            # valid, Start was on, Connect silent)
+            self._bench_error = str(exc)
+            self.bench_panel.connect_button.setEnabled(False)
+            self.bench_panel.path_edit.setText(shown_path(path) if path is not None else "")
+            if self.protocol_panel.editor.toPlainText().strip():
+                self.protocol_panel.validate_now()
             return False
         self._disconnect()
         self.bench_file = bf

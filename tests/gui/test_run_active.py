@@ -258,3 +258,34 @@ def test_a_run_names_its_file_in_the_title_and_dry_run_waits_for_it(
         assert "a run is active" in win.log_view.lines[-1]
     assert "next.h5" in win.windowTitle()
     assert win.protocol_panel.dry_button.isEnabled()
+
+
+def test_a_bad_bench_file_opened_over_a_good_one_is_refused_and_the_old_one_said(
+    qtbot: Any, tmp_path: Path
+) -> None:
+    """Open bench… of a bad file while a good one was loaded: the old bench stayed in use and
+    the panel kept its path, but the status line showed only the new file's error, as if the
+    bad file were the bench."""
+    from protocols.bench import default_bench_path
+
+    text = default_bench_path().read_text(encoding="utf-8")
+    bad = tmp_path / "bad_bench.yaml"
+    bad.write_text(text.replace("max_amplitude: 10 Vpp", "max_amplitude: 10 V"), "utf-8")
+    win = _window(qtbot, tmp_path / "run.h5", assembler=make_assembler())
+    connect(qtbot, win)
+    good, path_shown = win.bench_file, win.bench_panel.path_edit.text()
+    assert not win.load_bench(bad)
+    error = "generator.max_amplitude: '10 V' does not say peak or peak-to-peak"
+    status = win.bench_panel.status_label.text()
+    assert status.startswith("✗ bench file refused:") and "bad_bench.yaml" in status
+    assert error in status and "still using 'simulated bench'" in status
+    assert path_shown in status and "connected (sim)" in status
+    assert win.bench_panel.path_edit.text() == path_shown  # the bench in use, as before
+    assert win.bench_file is good and win.instruments is not None
+    assert win.log_view.lines[-1].split(" ", 2)[2].strip().startswith("bench file refused")
+    assert error in win.log_view.lines[-1] and "still using" in win.log_view.lines[-1]
+    assert win.run_panel.start_button.isEnabled()  # the old bench still runs
+    assert win.bench_panel.connect_button.isEnabled()
+    with qtbot.waitSignal(win.run_finished, timeout=60_000) as blocker:
+        win.run_panel.start_button.click()
+    assert blocker.args == ["complete"]
