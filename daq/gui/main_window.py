@@ -358,6 +358,7 @@ class MainWindow(QMainWindow):
             # valid, Start was on, Connect silent)
             self._bench_error = str(exc)
             self.bench_panel.connect_button.setEnabled(False)
+            self.run_panel.set_bench_ok(False)  # Resume file… too, as Start
             self.bench_panel.path_edit.setText(shown_path(path) if path is not None else "")
             if self.protocol_panel.editor.toPlainText().strip():
                 self.protocol_panel.validate_now()
@@ -365,6 +366,7 @@ class MainWindow(QMainWindow):
         self._disconnect()
         self.bench_file = bf
         self._bench_error = None
+        self.run_panel.set_bench_ok(True)
         shown = Path(path) if path is not None else default_bench_path()
         self.bench_panel.path_edit.setText(shown_path(shown))
         kind = "simulated" if bf.bench.simulated else "hardware"
@@ -702,6 +704,9 @@ class MainWindow(QMainWindow):
         return path
 
     def _ask_resume_file(self) -> None:
+        if self.bench_file is None and self._bench_error is not None:  # before the dialog
+            self.log(f"cannot resume: the bench file is not valid: {self._bench_error}", "error")
+            return
         path, _ = QFileDialog.getOpenFileName(self, "Resume run file", "runs", "Run files (*.h5)")
         if path:
             self.start_run(Path(path))

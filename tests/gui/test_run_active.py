@@ -289,3 +289,39 @@ def test_a_bad_bench_file_opened_over_a_good_one_is_refused_and_the_old_one_said
     with qtbot.waitSignal(win.run_finished, timeout=60_000) as blocker:
         win.run_panel.start_button.click()
     assert blocker.args == ["complete"]
+
+
+def test_resume_file_waits_for_a_bench_file_that_loads(
+    qtbot: Any, tmp_path: Path, monkeypatch: Any
+) -> None:
+    """With a bad bench file, Resume file… stayed enabled: it opened the file dialog, and only
+    after a file was chosen refused, naming the bench file's error."""
+    from PySide6.QtWidgets import QFileDialog
+
+    from protocols.bench import default_bench_path
+
+    asked: list[int] = []
+
+    def dialog(*args: Any, **kwargs: Any) -> tuple[str, str]:
+        asked.append(1)
+        return "", ""  # cancelled
+
+    monkeypatch.setattr(QFileDialog, "getOpenFileName", staticmethod(dialog))
+    text = default_bench_path().read_text(encoding="utf-8")
+    bad = tmp_path / "bad_bench.yaml"
+    bad.write_text(text.replace("max_amplitude: 10 Vpp", "max_amplitude: 10 V"), "utf-8")
+    win = MainWindow(bad, SMOKE, assembler=make_assembler())
+    win.confirm_close = lambda: True  # type: ignore[method-assign]
+    qtbot.addWidget(win)
+    win.show()
+    error = "generator.max_amplitude: '10 V' does not say peak or peak-to-peak"
+    assert not win.run_panel.resume_file_button.isEnabled()
+    win.run_panel.set_state("idle")  # a run's end (or a refusal) sets the buttons again
+    assert not win.run_panel.resume_file_button.isEnabled()
+    win._ask_resume_file()  # from code: refused before the dialog, naming the bench's error
+    assert asked == []
+    assert "cannot resume" in win.log_view.lines[-1] and error in win.log_view.lines[-1]
+    assert win.load_bench(None)  # a good one: Resume file… is back
+    assert win.run_panel.resume_file_button.isEnabled()
+    win._ask_resume_file()
+    assert asked == [1]
