@@ -932,6 +932,19 @@ class MainWindow(QMainWindow):
         else:
             reason = f": {d['reason']}" if d.get("reason") else ""
             line = f"run {status}{reason}"
+        if (
+            status != "unsafe"
+            and self._unsafe_mark is not None
+            and d.get("safe_state_s") is not None
+        ):
+            # this run's end read every output back off and the stage at rest: said before the
+            # run's last line, which stays the last of the window's log and of the run's log
+            # file (before, this note came after it there)
+            self.log(
+                "the earlier run's UNSAFE is taken down: this run's end read every output back "
+                "off and the stage at rest"
+            )
+            self._clear_unsafe_mark()
         self.log(line, level)
         self.run_panel.where_label.setText(in_window_words(line))
         # unsafe: red and bold until the next run, and in the status bar (no modal dialog: the
@@ -952,13 +965,6 @@ class MainWindow(QMainWindow):
                 else "confirmed; switch off by hand what the run's last line names"
             )
             self._bench_status("")
-        elif self._unsafe_mark is not None and d.get("safe_state_s") is not None:
-            # this run's end read every output back off and the stage at rest
-            self.log(
-                "the earlier run's UNSAFE is taken down: this run's end read every output back "
-                "off and the stage at rest"
-            )
-            self._clear_unsafe_mark()
         if self.last_result is not None:  # the process's status is the last run's, as
             from daq.engine.outcome import exit_code  # run_protocol's (0 when it completed)
 
