@@ -339,18 +339,34 @@ class MainWindow(QMainWindow):
         try:
             bf = load_bench(path)
         except (ConfigError, OSError) as exc:
+            if self.bench_file is not None:  # refused: the bench loaded stays, and is said
+                # (before, the panel kept its path while the line showed the new file's error)
+                old = self.bench_file.bench.name
+                state = (
+                    f"connected ({self.instruments.backend})"
+                    if self.instruments is not None
+                    else "not connected"
+                )
+                where = self.bench_panel.path_edit.text()
+                line = f"bench file refused: {exc}; still using {old!r} ({where}, {state})"
+                self._bench_status(f"✗ {line}", "QLabel { color: #b00000; }")
+                self.log(line, "error")
+                return False
             self._bench_status(f"✗ {exc}")
             self.log(str(exc), "error")
-            if self.bench_file is None:  # no bench to connect to or to run on: said as such
-                self._bench_error = str(exc)  # (before, the protocol read valid, Start was
-                self.bench_panel.connect_button.setEnabled(False)  # on, Connect silent)
-                self.bench_panel.path_edit.setText(shown_path(path) if path is not None else "")
-                if self.protocol_panel.editor.toPlainText().strip():
-                    self.protocol_panel.validate_now()
+            # no bench to connect to or to run on: said as such (before, the protocol read
+            # valid, Start was on, Connect silent)
+            self._bench_error = str(exc)
+            self.bench_panel.connect_button.setEnabled(False)
+            self.run_panel.set_bench_ok(False)  # Resume file… too, as Start
+            self.bench_panel.path_edit.setText(shown_path(path) if path is not None else "")
+            if self.protocol_panel.editor.toPlainText().strip():
+                self.protocol_panel.validate_now()
             return False
         self._disconnect()
         self.bench_file = bf
         self._bench_error = None
+        self.run_panel.set_bench_ok(True)
         shown = Path(path) if path is not None else default_bench_path()
         self.bench_panel.path_edit.setText(shown_path(shown))
         kind = "simulated" if bf.bench.simulated else "hardware"
@@ -688,6 +704,9 @@ class MainWindow(QMainWindow):
         return path
 
     def _ask_resume_file(self) -> None:
+        if self.bench_file is None and self._bench_error is not None:  # before the dialog
+            self.log(f"cannot resume: the bench file is not valid: {self._bench_error}", "error")
+            return
         path, _ = QFileDialog.getOpenFileName(self, "Resume run file", "runs", "Run files (*.h5)")
         if path:
             self.start_run(Path(path))
@@ -786,7 +805,9 @@ class MainWindow(QMainWindow):
         self.run_panel.progress.setValue(self.live.n_points)  # a resumed run's points: done
         self.run_panel.set_state("running")
         self.run_panel.where_label.setStyleSheet("")  # a refusal's red, before this run
-        self._clear_unsafe_mark()
+        # an earlier run's UNSAFE stays up through this one: only its end, reading every output
+        # back off and the stage at rest, takes it down (:meth:`_finished`); before, Start took
+        # it down unchecked
         from daq.logsetup import detach, hold_run_log
 
         detach(getattr(self, "_run_log", None))
@@ -911,6 +932,19 @@ class MainWindow(QMainWindow):
         else:
             reason = f": {d['reason']}" if d.get("reason") else ""
             line = f"run {status}{reason}"
+        if (
+            status != "unsafe"
+            and self._unsafe_mark is not None
+            and d.get("safe_state_s") is not None
+        ):
+            # this run's end read every output back off and the stage at rest: said before the
+            # run's last line, which stays the last of the window's log and of the run's log
+            # file (before, this note came after it there)
+            self.log(
+                "the earlier run's UNSAFE is taken down: this run's end read every output back "
+                "off and the stage at rest"
+            )
+            self._clear_unsafe_mark()
         self.log(line, level)
         self.run_panel.where_label.setText(in_window_words(line))
         # unsafe: red and bold until the next run, and in the status bar (no modal dialog: the
@@ -921,9 +955,14 @@ class MainWindow(QMainWindow):
         self.run_panel.where_label.setStyleSheet(f"QLabel {{ {style} }}" if style else "")
         if status == "unsafe":
             self.statusBar().showMessage(line)
-            self._unsafe_mark = (
-                "✗ UNSAFE: the safe state was not confirmed; switch off by hand what the "
-                "run's last line names"
+            from daq.engine.outcome import unsafe_instruction
+
+            unconfirmed = list(d.get("unconfirmed") or [])
+            # what to switch off named here: a next run replaces the run's last line
+            self._unsafe_mark = f"✗ UNSAFE: the safe state of {Path(d['path']).name} was not " + (
+                f"confirmed; {unsafe_instruction(unconfirmed)}"
+                if unconfirmed
+                else "confirmed; switch off by hand what the run's last line names"
             )
             self._bench_status("")
         if self.last_result is not None:  # the process's status is the last run's, as
@@ -967,9 +1006,10 @@ class MainWindow(QMainWindow):
         label.setText(f"{self._unsafe_mark}\n{text}" if text else self._unsafe_mark)
 
     def _clear_unsafe_mark(self) -> None:
-        """Take down the bench panel's "UNSAFE" of an earlier run: once a Safe state, or the
-        outputs read back after a Reconnect, confirmed every output off (or a new run starts).
-        Before, a Reconnect took it down unchecked, a generator output reported on."""
+        """Take down the bench panel's "UNSAFE" of an earlier run: once a Safe state, the
+        outputs read back after a Reconnect, or a later run's end confirmed every output off
+        and the stage at rest. Before, a Reconnect, and the start of a run, took it down
+        unchecked, a generator output reported on."""
         if self._unsafe_mark is None:
             return
         self._unsafe_mark = None

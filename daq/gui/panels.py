@@ -237,6 +237,7 @@ class RunPanel(QGroupBox):
         self.resume_file_button.clicked.connect(self.resume_file_requested)
         self._blocked = False  # another task works on the instruments (set_blocked)
         self._startable = True  # the editor's protocol is valid (set_startable)
+        self._bench_ok = True  # a bench file is loaded to run on (set_bench_ok)
         self.set_state("idle")
 
     def set_blocked(self, blocked: bool) -> None:
@@ -251,6 +252,13 @@ class RunPanel(QGroupBox):
         self._startable = startable
         self.set_state(self._state)
 
+    def set_bench_ok(self, ok: bool) -> None:
+        """Resume file… only with a bench to run on (a bench file that did not load, none
+        loaded: before, it opened the file dialog and then refused, naming the bench's error).
+        Start needs the bench too: the protocol does not validate without one."""
+        self._bench_ok = ok
+        self.set_state(self._state)
+
     @property
     def active(self) -> bool:
         """A run starts, runs or is paused."""
@@ -262,7 +270,7 @@ class RunPanel(QGroupBox):
         active = state in ("running", "paused", "starting")
         free = not active and not self._blocked
         self.start_button.setEnabled(free and self._startable)
-        self.resume_file_button.setEnabled(free)
+        self.resume_file_button.setEnabled(free and self._bench_ok)
         self.pause_button.setEnabled(state == "running")
         self.resume_button.setEnabled(state == "paused")
         self.abort_button.setEnabled(active)

@@ -258,3 +258,70 @@ def test_a_run_names_its_file_in_the_title_and_dry_run_waits_for_it(
         assert "a run is active" in win.log_view.lines[-1]
     assert "next.h5" in win.windowTitle()
     assert win.protocol_panel.dry_button.isEnabled()
+
+
+def test_a_bad_bench_file_opened_over_a_good_one_is_refused_and_the_old_one_said(
+    qtbot: Any, tmp_path: Path
+) -> None:
+    """Open bench… of a bad file while a good one was loaded: the old bench stayed in use and
+    the panel kept its path, but the status line showed only the new file's error, as if the
+    bad file were the bench."""
+    from protocols.bench import default_bench_path
+
+    text = default_bench_path().read_text(encoding="utf-8")
+    bad = tmp_path / "bad_bench.yaml"
+    bad.write_text(text.replace("max_amplitude: 10 Vpp", "max_amplitude: 10 V"), "utf-8")
+    win = _window(qtbot, tmp_path / "run.h5", assembler=make_assembler())
+    connect(qtbot, win)
+    good, path_shown = win.bench_file, win.bench_panel.path_edit.text()
+    assert not win.load_bench(bad)
+    error = "generator.max_amplitude: '10 V' does not say peak or peak-to-peak"
+    status = win.bench_panel.status_label.text()
+    assert status.startswith("✗ bench file refused:") and "bad_bench.yaml" in status
+    assert error in status and "still using 'simulated bench'" in status
+    assert path_shown in status and "connected (sim)" in status
+    assert win.bench_panel.path_edit.text() == path_shown  # the bench in use, as before
+    assert win.bench_file is good and win.instruments is not None
+    assert win.log_view.lines[-1].split(" ", 2)[2].strip().startswith("bench file refused")
+    assert error in win.log_view.lines[-1] and "still using" in win.log_view.lines[-1]
+    assert win.run_panel.start_button.isEnabled()  # the old bench still runs
+    assert win.bench_panel.connect_button.isEnabled()
+    with qtbot.waitSignal(win.run_finished, timeout=60_000) as blocker:
+        win.run_panel.start_button.click()
+    assert blocker.args == ["complete"]
+
+
+def test_resume_file_waits_for_a_bench_file_that_loads(
+    qtbot: Any, tmp_path: Path, monkeypatch: Any
+) -> None:
+    """With a bad bench file, Resume file… stayed enabled: it opened the file dialog, and only
+    after a file was chosen refused, naming the bench file's error."""
+    from PySide6.QtWidgets import QFileDialog
+
+    from protocols.bench import default_bench_path
+
+    asked: list[int] = []
+
+    def dialog(*args: Any, **kwargs: Any) -> tuple[str, str]:
+        asked.append(1)
+        return "", ""  # cancelled
+
+    monkeypatch.setattr(QFileDialog, "getOpenFileName", staticmethod(dialog))
+    text = default_bench_path().read_text(encoding="utf-8")
+    bad = tmp_path / "bad_bench.yaml"
+    bad.write_text(text.replace("max_amplitude: 10 Vpp", "max_amplitude: 10 V"), "utf-8")
+    win = MainWindow(bad, SMOKE, assembler=make_assembler())
+    win.confirm_close = lambda: True  # type: ignore[method-assign]
+    qtbot.addWidget(win)
+    win.show()
+    error = "generator.max_amplitude: '10 V' does not say peak or peak-to-peak"
+    assert not win.run_panel.resume_file_button.isEnabled()
+    win.run_panel.set_state("idle")  # a run's end (or a refusal) sets the buttons again
+    assert not win.run_panel.resume_file_button.isEnabled()
+    win._ask_resume_file()  # from code: refused before the dialog, naming the bench's error
+    assert asked == []
+    assert "cannot resume" in win.log_view.lines[-1] and error in win.log_view.lines[-1]
+    assert win.load_bench(None)  # a good one: Resume file… is back
+    assert win.run_panel.resume_file_button.isEnabled()
+    win._ask_resume_file()
+    assert asked == [1]

@@ -9,7 +9,7 @@ from typing import Any
 from daq.connect import connect_bench
 from daq.gui.main_window import MainWindow
 
-from .conftest import SMOKE, connect
+from .conftest import SMOKE, SlowDigitiser, connect, wait_until
 
 
 def test_reconnect_keeps_unsafe_until_every_output_reads_back_off(
@@ -57,3 +57,72 @@ def test_reconnect_keeps_unsafe_until_every_output_reads_back_off(
     assert not label.text().startswith("✗ UNSAFE")
     assert "connected" in label.text() and "b00000" not in label.styleSheet()
     assert win.exit_status == 3  # the run's, whatever the panel says now
+
+
+def test_a_new_run_keeps_unsafe_until_its_end_confirms_the_safe_state(
+    qtbot: Any, tmp_path: Path
+) -> None:
+    """Start took the last run's UNSAFE down before anything was read back: the panel said
+    "connected" while the output the run could not switch off had not been confirmed off."""
+
+    def bench(bf: Any, seed: int | None) -> Any:  # the generator goes silent mid-run
+        inst = connect_bench(
+            bf, seed=seed, faults={"generator_silent": True, "after_acquisitions": 3}
+        )
+        inst.digitiser = SlowDigitiser(inst.digitiser, 0.05)
+        return inst
+
+    win = MainWindow(None, SMOKE, assembler=bench)
+    win.confirm_close = lambda: True  # type: ignore[method-assign]
+    qtbot.addWidget(win)
+    win.show()
+    win.run_panel.out_edit.setText(str(tmp_path / "u.h5"))
+    connect(qtbot, win)
+    with qtbot.waitSignal(win.run_finished, timeout=60_000) as blocker:
+        win.run_panel.start_button.click()
+    assert blocker.args == ["unsafe"]
+    label = win.bench_panel.status_label
+    # what to switch off is named on the panel itself: the next run replaces the run's line
+    assert label.text().startswith("✗ UNSAFE") and "u.h5" in label.text()
+    assert "SWITCH OFF BY HAND" in label.text() and "output 1" in label.text()
+
+    win.instruments.world.faults.clear()  # the generator answers again
+    qtbot.waitUntil(lambda: win.run_panel.start_button.isEnabled(), timeout=10_000)
+    win.run_panel.out_edit.setText(str(tmp_path / "next.h5"))
+    with qtbot.waitSignal(win.run_finished, timeout=60_000) as blocker:
+        win.run_panel.start_button.click()
+        assert win.running and label.text().startswith("✗ UNSAFE")  # nothing confirmed yet
+        wait_until(qtbot, lambda: win.live.n_points >= 1, 30)
+        assert label.text().startswith("✗ UNSAFE")  # mid-run: still nothing read back
+    assert blocker.args == ["complete"]
+    assert not label.text().startswith("✗ UNSAFE") and "b00000" not in label.styleSheet()
+    assert any("UNSAFE is taken down" in line for line in win.log_view.lines[-4:])
+    assert win.exit_status == 0  # the last run's
+
+
+def test_a_new_run_that_ends_unsafe_again_keeps_the_mark_naming_its_file(
+    qtbot: Any, tmp_path: Path
+) -> None:
+    def bench(bf: Any, seed: int | None) -> Any:
+        return connect_bench(
+            bf, seed=seed, faults={"generator_silent": True, "after_acquisitions": 3}
+        )
+
+    win = MainWindow(None, SMOKE, assembler=bench)
+    win.confirm_close = lambda: True  # type: ignore[method-assign]
+    qtbot.addWidget(win)
+    win.show()
+    win.run_panel.out_edit.setText(str(tmp_path / "u.h5"))
+    connect(qtbot, win)
+    with qtbot.waitSignal(win.run_finished, timeout=60_000):
+        win.run_panel.start_button.click()
+    qtbot.waitUntil(lambda: win.run_panel.start_button.isEnabled(), timeout=10_000)
+    label = win.bench_panel.status_label
+    assert label.text().startswith("✗ UNSAFE")
+    win.run_panel.out_edit.setText(str(tmp_path / "again.h5"))  # the generator still silent
+    with qtbot.waitSignal(win.run_finished, timeout=60_000) as blocker:
+        win.run_panel.start_button.click()
+        assert label.text().startswith("✗ UNSAFE")
+    assert blocker.args == ["unsafe"]
+    assert label.text().startswith("✗ UNSAFE") and "again.h5" in label.text()
+    assert not any("taken down" in line for line in win.log_view.lines)
