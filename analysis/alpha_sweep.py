@@ -230,17 +230,19 @@ def alpha_verdict(
     """``"bands overlap"`` (no one-band prediction, no converted line), ``"filtering"`` (a
     conversion by :func:`analysis.summary.conversion_verdict` whose output peak lies within
     ``DETUNING_MIN_FRACTION x f_in`` of the linear run's: the linear run already shows that
-    detuning), ``"acoustic band"`` (the output peak lies below ``acoustic_cutoff_Hz``, the
-    highest acoustic cutoff along the chain: energy in the acoustic band, not a line of the
-    first local-resonance band), else that verdict (``"down"``, ``"up"``, ``"none"``,
-    ``"not measured"``). The gain is ``transmission / linear_transmission`` (NaN without a
-    linear run: the level rule)."""
+    detuning), ``"acoustic band"`` (a conversion by that verdict whose output peak lies below
+    ``acoustic_cutoff_Hz``, the highest acoustic cutoff along the chain: energy in the acoustic
+    band, not a line of the first local-resonance band), else that verdict (``"down"``,
+    ``"up"``, ``"none"``, ``"not measured"``). The gain is ``transmission /
+    linear_transmission`` (NaN without a linear run: the level rule)."""
     if bands_overlap:
         return "bands overlap"
-    if math.isfinite(output_Hz) and output_Hz < acoustic_cutoff_Hz:
-        return "acoustic band"
     gain = transmission / linear_transmission if linear_transmission > 0 else math.nan
     verdict = conversion_verdict(output_Hz - f_in_Hz, f_in_Hz, transmission, gain)
+    # only a line that passed can be in the acoustic band (before, a peak there read
+    # "acoustic band" though nothing passed; a reviewer)
+    if verdict in ("down", "up") and math.isfinite(output_Hz) and output_Hz < acoustic_cutoff_Hz:
+        return "acoustic band"
     if (
         verdict in ("down", "up")
         and math.isfinite(linear_output_Hz)

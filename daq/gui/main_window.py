@@ -117,6 +117,8 @@ class MainWindow(QMainWindow):
         #: the bench panel's "UNSAFE" of a run that could not confirm its safe state: up until
         #: a safe state is confirmed (:meth:`_clear_unsafe_mark`), whatever else the panel says
         self._unsafe_mark: str | None = None
+        #: the bench file text the UNSAFE run ran on: only that bench's read-back takes it down
+        self._unsafe_bench: str | None = None
         #: a run file opened during a run: read and shown once the run has ended
         self._open_after_run: tuple[Path, Callable[[bool], None] | None] | None = None
         self.live = LiveData()
@@ -487,9 +489,10 @@ class MainWindow(QMainWindow):
         self.chain = inst.chain
         self.bench_panel.set_connected(True)
         if self._unsafe_mark is not None and not_off == []:  # read back: every output off
-            self.log("the last run's UNSAFE is taken down: after Reconnect every output reads "
-                     "back off and the stage is at rest")  # fmt: skip
-            self._clear_unsafe_mark()
+            self._clear_unsafe_mark(
+                "the last run's UNSAFE is taken down: after Reconnect every output reads back "
+                "off and the stage is at rest"
+            )
         elif self._unsafe_mark is not None:  # before, Reconnect took it down unchecked
             self.log(
                 "UNSAFE still holds after Reconnect: "
@@ -940,11 +943,10 @@ class MainWindow(QMainWindow):
             # this run's end read every output back off and the stage at rest: said before the
             # run's last line, which stays the last of the window's log and of the run's log
             # file (before, this note came after it there)
-            self.log(
+            self._clear_unsafe_mark(
                 "the earlier run's UNSAFE is taken down: this run's end read every output back "
                 "off and the stage at rest"
             )
-            self._clear_unsafe_mark()
         self.log(line, level)
         self.run_panel.where_label.setText(in_window_words(line))
         # unsafe: red and bold until the next run, and in the status bar (no modal dialog: the
@@ -959,6 +961,7 @@ class MainWindow(QMainWindow):
 
             unconfirmed = list(d.get("unconfirmed") or [])
             # what to switch off named here: a next run replaces the run's last line
+            self._unsafe_bench = self.bench_file.text if self.bench_file is not None else None
             self._unsafe_mark = f"✗ UNSAFE: the safe state of {Path(d['path']).name} was not " + (
                 f"confirmed; {unsafe_instruction(unconfirmed)}"
                 if unconfirmed
@@ -1005,14 +1008,26 @@ class MainWindow(QMainWindow):
         label.setStyleSheet("QLabel { color: #b00000; font-weight: bold; }")
         label.setText(f"{self._unsafe_mark}\n{text}" if text else self._unsafe_mark)
 
-    def _clear_unsafe_mark(self) -> None:
+    def _clear_unsafe_mark(self, said: str = "") -> None:
         """Take down the bench panel's "UNSAFE" of an earlier run: once a Safe state, the
         outputs read back after a Reconnect, or a later run's end confirmed every output off
-        and the stage at rest. Before, a Reconnect, and the start of a run, took it down
-        unchecked, a generator output reported on."""
+        and the stage at rest, on the bench that run ran on (``said``: logged when it goes).
+        Before, a Reconnect, and the start of a run, took it down unchecked, a generator output
+        reported on; and another bench's read-back took it down too (a reviewer)."""
         if self._unsafe_mark is None:
             return
+        here = self.bench_file.text if self.bench_file is not None else None
+        if self._unsafe_bench is not None and here != self._unsafe_bench:
+            self.log(
+                "UNSAFE still holds: that read-back was of another bench than the one the "
+                "UNSAFE run ran on; open that bench file and confirm its safe state",
+                "error",
+            )
+            return
+        if said:
+            self.log(said)
         self._unsafe_mark = None
+        self._unsafe_bench = None
         name = self.bench_file.bench.name if self.bench_file is not None else "bench"
         backend = getattr(self.instruments, "backend", "")
         self._bench_status(f"{name}: connected ({backend})" if backend else name)
@@ -1140,9 +1155,10 @@ class MainWindow(QMainWindow):
 
     def closeEvent(self, event: QCloseEvent) -> None:
         signum = self._stop_signal
+        self._open_after_run = None  # no run file waiting to be shown (before the ended run
+        # is handled: that would start reading it while the window closes; a reviewer)
         self._handle_ended_run()  # a run that ended unhandled: its outcome, not a question
         self._pending_start = self._prefilling = None  # a start under way does not go ahead
-        self._open_after_run = None  # nor a run file waiting to be shown
         if not self.running and signum is not None and self.exit_status != 3:
             self.exit_status = 128 + signum  # idle: the signal's own (an unsafe end's 3 stays)
         if self.running:
@@ -1230,13 +1246,19 @@ def _not_confirmed_off(instruments: Any, channels: list[int]) -> list[str]:
             if gen.output_state(ch):
                 said.append(f"{generator_name(gen)} output {ch} is ON")
         except Exception as exc:
-            said.append(f"{generator_name(gen)} output {ch}: cannot read it back ({exc})")
+            said.append(f"{generator_name(gen)} output {ch}: cannot read it back ({_first(exc)})")
     try:
         if instruments.stage.is_moving():
             said.append("stage controller: the axis moves")
     except Exception as exc:
-        said.append(f"stage: cannot read whether it moves ({exc})")
+        said.append(f"stage: cannot read whether it moves ({_first(exc)})")
     return said
+
+
+def _first(exc: BaseException) -> str:
+    """An exception's first line (the window's log holds one line a message)."""
+    text = str(exc)
+    return text.splitlines()[0] if text else type(exc).__name__
 
 
 #: the run panel's line while a run is paused

@@ -48,8 +48,9 @@ def amplitude_scale_text(values: Any, units: str) -> tuple[float, str]:
     """``(factor, unit)`` to show drive amplitudes in ``units`` (a run file's, a plan's): the
     generator's volts as Vpp, a displacement (m) or a force (N) with a readable prefix
     (:func:`analysis.display.amplitude_scale`, "u" for micro as the window writes it). Before,
-    every unit but m read Vpp: a 12 N force run was labelled 12 Vpp."""
-    if units == "V":  # the generator's peak-to-peak volts
+    every unit but m read Vpp: a 12 N force run was labelled 12 Vpp. A file that names no
+    unit ("": before units were stored) is read as the generator's, as it was."""
+    if units in ("V", ""):  # the generator's peak-to-peak volts
         return 1.0, "Vpp"
     factor, unit = amplitude_scale(values, units)
     return factor, unit.replace("µ", "u")
@@ -57,7 +58,9 @@ def amplitude_scale_text(values: Any, units: str) -> tuple[float, str]:
 
 def amplitude_text(amplitude: float, units: str) -> str:
     """A drive amplitude with its unit, e.g. ``2e-6, "m"`` -> ``"2 um"``, ``12, "N"`` ->
-    ``"12 N"``, ``1, "V"`` -> ``"1 Vpp"``."""
+    ``"12 N"``, ``1, "V"`` -> ``"1 Vpp"``; ``"-"`` for an amplitude that is not a number."""
+    if not np.isfinite(amplitude):
+        return "-"
     factor, unit = amplitude_scale_text([amplitude], units)
     return f"{amplitude / factor:.3g} {unit}".rstrip()
 

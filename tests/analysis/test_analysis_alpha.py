@@ -146,3 +146,12 @@ def test_a_peak_in_the_acoustic_band_is_no_conversion() -> None:
         "acoustic band"
     )
     assert alpha_verdict(6630.0, 8800.0, 0.013, 7000.0, 1e-7, acoustic_cutoff_Hz=3964.0) == "up"
+
+
+def test_a_line_below_the_acoustic_cutoff_that_did_not_pass_is_no_acoustic_band() -> None:
+    """A reviewer: "acoustic band" was decided before the transmission rule, so a peak there
+    read "acoustic band" though nothing passed (gain 1, the linear run's own line)."""
+    from analysis.alpha_sweep import alpha_verdict
+
+    assert alpha_verdict(6630, 2960, 1e-6, 2960, 1e-6, acoustic_cutoff_Hz=3960) == "none"
+    assert alpha_verdict(6630, 2960, 0.2, 6700, 1e-6, acoustic_cutoff_Hz=3960) == "acoustic band"

@@ -325,3 +325,34 @@ def test_resume_file_waits_for_a_bench_file_that_loads(
     assert win.run_panel.resume_file_button.isEnabled()
     win._ask_resume_file()
     assert asked == [1]
+
+
+def test_close_after_an_unhandled_end_does_not_start_reading_a_queued_file(
+    qtbot: Any, tmp_path: Path
+) -> None:
+    """A reviewer: Close handled the ended run first, whose end then opened the run file
+    queued during the run: a background read the closing window waited on."""
+    win = MainWindow(None, SMOKE, assembler=make_assembler(read_sleep_s=0.05))
+    win.confirm_close = lambda: True  # type: ignore[method-assign]
+    qtbot.addWidget(win)
+    win.show()
+    win.run_panel.out_edit.setText(str(tmp_path / "a.h5"))
+    connect(qtbot, win)
+    with qtbot.waitSignal(win.run_finished, timeout=60_000):
+        win.run_panel.start_button.click()
+    first = tmp_path / "a.h5"
+    win.run_panel.out_edit.setText(str(tmp_path / "b.h5"))
+    qtbot.waitUntil(
+        lambda: win.run_panel.start_button.isEnabled() and not win._busy, timeout=20_000
+    )
+    win.run_panel.start_button.click()
+    assert win.running
+    win.open_run_file(first)
+    qtbot.waitUntil(lambda: win._open_after_run is not None, timeout=20_000)
+    assert win.engine is not None
+    win.engine.wait(60)  # the run ends; its FINISHED not handled yet (the GUI thread is here)
+    opened: list[Path] = []
+    real = win.open_run_file
+    win.open_run_file = lambda p, cb=None: (opened.append(p), real(p, cb))  # type: ignore[method-assign]
+    win.close()
+    assert opened == []

@@ -126,3 +126,42 @@ def test_a_new_run_that_ends_unsafe_again_keeps_the_mark_naming_its_file(
     assert blocker.args == ["unsafe"]
     assert label.text().startswith("✗ UNSAFE") and "again.h5" in label.text()
     assert not any("taken down" in line for line in win.log_view.lines)
+
+
+def test_another_benchs_read_back_does_not_take_unsafe_down(qtbot: Any, tmp_path: Path) -> None:
+    """A reviewer: after an UNSAFE end, opening another bench file and connecting read back
+    that bench's outputs and took down the first bench's UNSAFE."""
+    from protocols.bench import load_bench
+
+    calls: list[int] = []
+
+    def bench(bf: Any, seed: int | None) -> Any:
+        calls.append(1)
+        if len(calls) == 1:  # the generator goes silent mid-run: the run ends UNSAFE
+            return connect_bench(
+                bf, seed=seed, faults={"generator_silent": True, "after_acquisitions": 3}
+            )
+        return connect_bench(bf, seed=seed)
+
+    win = MainWindow(None, SMOKE, assembler=bench)
+    win.confirm_close = lambda: True  # type: ignore[method-assign]
+    qtbot.addWidget(win)
+    win.show()
+    win.run_panel.out_edit.setText(str(tmp_path / "u.h5"))
+    connect(qtbot, win)
+    first = win.bench_file
+    with qtbot.waitSignal(win.run_finished, timeout=60_000) as blocker:
+        win.run_panel.start_button.click()
+    assert blocker.args == ["unsafe"]
+    label = win.bench_panel.status_label
+    qtbot.waitUntil(lambda: win.bench_panel.connect_button.isEnabled(), timeout=10_000)
+    other = tmp_path / "other_bench.yaml"
+    other.write_text(load_bench().text.replace("name: simulated bench", "name: bench two", 1))
+    assert win.load_bench(other)
+    connect(qtbot, win)  # another bench's outputs read back off
+    assert label.text().startswith("✗ UNSAFE")
+    assert any("another bench than the one the UNSAFE run ran on" in line
+               for line in win.log_view.lines[-4:])  # fmt: skip
+    assert first is not None and win.load_bench(first.path)  # the UNSAFE run's own bench
+    connect(qtbot, win)  # its outputs read back off: now it goes
+    assert not label.text().startswith("✗ UNSAFE")

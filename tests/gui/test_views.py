@@ -178,3 +178,13 @@ def test_a_force_driven_run_is_labelled_in_newtons(qtbot: Any) -> None:
     from daq.gui.views import amplitude_text
 
     assert amplitude_text(1.0, "V") == "1 Vpp" and amplitude_text(2e-6, "m") == "2 um"
+
+
+def test_an_amplitude_without_a_unit_or_a_number_is_labelled_as_before() -> None:
+    """A reviewer: a file that names no amplitude unit (read as "") showed a bare number where
+    it had shown Vpp, and a NaN amplitude read "nan m"."""
+    from daq.gui.views import amplitude_text
+
+    assert amplitude_text(1.0, "") == "1 Vpp"
+    assert amplitude_text(float("nan"), "m") == "-"
+    assert amplitude_text(12.0, "N") == "12 N" and amplitude_text(2e-6, "m") == "2 um"
