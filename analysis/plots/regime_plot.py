@@ -102,7 +102,10 @@ def plot_regime(sweeps: Mapping[str, AmplitudeSweep]) -> Figure:
         ax_t.set_yscale("log")
         ax_t.set_ylabel("far/near rms ratio")
         ax_t.set_title("Transmission against drive amplitude")
-        ax_t.legend(fontsize="small")
+        lo, hi = ax_t.get_ylim()  # room below the data for the legend (the bounds sit top
+        if 0 < lo < hi:  # left, the rising curves top right, the floors at the bottom)
+            ax_t.set_ylim(lo / (hi / lo) ** 0.3, hi)
+        ax_t.legend(fontsize="x-small", ncol=2, loc="lower right")
         ax_t.grid(True, which="both", alpha=0.3)
         ax_f.set_xlabel(f"drive amplitude ({unit})")
         ax_f.set_ylabel("far-end output peak (kHz)")
