@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from analysis.noise_floor import band_energy, band_noise_energy
+from analysis.noise_floor import MIN_BAND_DOF, band_dof, band_energy, band_noise_energy
 from analysis.spectra import amplitude_spectrum
 from analysis.sweep import AmplitudeSweep, amplitude_sweep
 from analysis.transmission import signal_energy
@@ -244,7 +244,10 @@ def spectral_noise_floor(
     and overstates a clean record's by up to sqrt(2) (only the noise in phase with the signal
     moves its magnitude), where the residual is small anyway."""
     pre = time_s < 0
-    if np.count_nonzero(pre) < MIN_PRETRIGGER:
+    if (
+        np.count_nonzero(pre) < MIN_PRETRIGGER
+        or band_dof(time_s, sample_rate_Hz, RESIDUAL_BAND_HZ) < MIN_BAND_DOF
+    ):  # too short a pre-trigger to know the noise within the band: no reference
         return np.full(velocity.shape[:-1], np.nan)
     e = band_energy(velocity, sample_rate_Hz, RESIDUAL_BAND_HZ)
     n = band_noise_energy(velocity, time_s, sample_rate_Hz, RESIDUAL_BAND_HZ)

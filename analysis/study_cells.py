@@ -132,6 +132,16 @@ def _fmt(name: str, value: float) -> Any:
     return f"{value!r} {info.unit}"
 
 
+def _shown(name: str, value: float) -> str:
+    """A parameter's value for a message (4 significant digits, its SI unit): a Latin
+    hypercube's raw floats read "diameter = 0.015337945819433435 m"."""
+    info = PARAMETERS[name]
+    if info.integer:
+        return str(round(value))
+    unit = "" if info.dimension == "dimensionless" else f" {info.unit}"
+    return f"{value:.4g}{unit}"
+
+
 def cell_chain_spec(base_json: str, params: dict[str, float]) -> Any:
     """The chain of a cell: the base chain with the cell's chain parameters (SI floats) applied,
     validated like a chain file (``alpha`` then tilts it, :func:`chain_spec_for_alpha`).
@@ -238,7 +248,7 @@ def check_transit(setup: StudySetup, table: CellTable) -> tuple[str, str] | None
             if window >= need * (1 - 1e-9) or (worst is not None and need <= worst[0]):
                 continue
             values = ", ".join(
-                f"{name} = {_fmt(name, row[name])}"
+                f"{name} = {_shown(name, row[name])}"
                 for name in table.names
                 if name in _CHAIN_PARAMS or name in ("cycles", f"carrier_{d}")
             )

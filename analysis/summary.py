@@ -86,10 +86,12 @@ def is_conversion(verdict: str) -> bool:
 
 def verdict_reason(row: dict[str, Any]) -> str:
     """The verdict of a :func:`summary_rows` row in words, with the numbers that decided it, to
-    print beside its output line: ``"not converted: E_far/E_in 7.1e-08 is below 0.01, ..."``.
-    With a single amplitude there is no linear reference: the rule is then the level alone, and
-    the text says so (whether a line that fails it is the chain's linear leak cannot be told
-    from one run)."""
+    print beside its output line: ``"not converted: gain 1.2 over the linear reference, ..."``.
+    With a single amplitude there is no linear reference, and the verdict is the
+    one-amplitude rule's (the level and the detuning), said as such: a broad burst's linear
+    leak can pass it (a 2-cycle LTR burst gives E_far/E_in 0.016 at 1 nm and at 10 nm alike; a
+    reviewer), so one run never says "converted", only what the rule gives and that a smaller
+    amplitude (``biafc regime``) tells the two apart."""
     verdict = str(row["conversion"])
     t, g = row.get("transmission"), row.get("transmission_gain")
     f_in, det = row.get("input_Hz"), row.get("detuning_Hz")
@@ -98,20 +100,30 @@ def verdict_reason(row: dict[str, Any]) -> str:
     if t is None or f_in is None or det is None or verdict not in ("down", "up", "none"):
         return verdict
     moved = f"|detuning| {abs(det) / f_in:.1%} of f_in"
-    if g is not None:
-        bound = ">=" if row.get("gain_is_lower_bound") else ""
-        energy = f"gain {bound}{g:.3g} over the linear reference"
-        passes, need, rule = g >= GAIN_MIN, f"{GAIN_MIN:g}", ""
-    else:
+    if g is None:  # one amplitude: the one-amplitude rule, never a conversion outright
         energy = f"E_far/E_in {t:.3g}"
-        passes, need = t >= TRANSMISSION_MIN, f"{TRANSMISSION_MIN:g}"
-        rule = " (one amplitude: no linear reference, the level alone decides)"
+        tell = "one run cannot tell a conversion from a linear leak: compare a smaller amplitude"
+        if is_conversion(verdict):
+            return (
+                f"{verdict} by the one-amplitude rule ({energy} >= {TRANSMISSION_MIN:g}, {moved} "
+                f">= {DETUNING_MIN_FRACTION:.0%}); {tell} (biafc regime)"
+            )
+        if t < TRANSMISSION_MIN:
+            return (
+                f"not converted by the one-amplitude rule: {energy}, below "
+                f"{TRANSMISSION_MIN:g} ({tell}: biafc regime)"
+            )
+        return (
+            f"not converted by the one-amplitude rule: {moved}, below {DETUNING_MIN_FRACTION:.0%}"
+        )
+    bound = ">=" if row.get("gain_is_lower_bound") else ""
+    energy = f"gain {bound}{g:.3g} over the linear reference"
     if is_conversion(verdict):
         return (
-            f"converted {verdict}: {energy} >= {need}{rule}, {moved} >= {DETUNING_MIN_FRACTION:.0%}"
+            f"converted {verdict}: {energy} >= {GAIN_MIN:g}, {moved} >= {DETUNING_MIN_FRACTION:.0%}"
         )
-    if not passes:
-        return f"not converted: {energy}, below {need}{rule}"
+    if not g >= GAIN_MIN:
+        return f"not converted: {energy}, below {GAIN_MIN:g}"
     return f"not converted: {moved}, below {DETUNING_MIN_FRACTION:.0%}"
 
 
@@ -192,7 +204,9 @@ def summarize(run: RunData) -> dict[str, Any]:
     "points", "noise_unknown", "noise_band_Hz", "rows": [...]}``; ``output_peak`` says per
     direction what ``output_Hz`` (f_out) is; ``noise_unknown``: the directions whose measured
     far records have no pre-trigger samples to estimate the noise from; ``noise_band_Hz``: per
-    direction, the band over which the far record is set against its noise.
+    direction, the band over which the far record is set against its noise;
+    ``noise_over_whole_record``: the directions whose pre-trigger was too short for that band,
+    set against their noise over the whole record.
 
     ``rows`` holds one dict per direction and amplitude (see :func:`summary_rows`).
     """
@@ -202,9 +216,12 @@ def summarize(run: RunData) -> dict[str, Any]:
     points: dict[str, dict[str, int]] = {}
     unknown: list[str] = []
     noise_band: dict[str, list[float]] = {}
+    whole_record: list[str] = []
     for direction, scan in run.scans.items():
         sweep = amplitude_sweep(scan, run.chain)
         noise_band[direction] = [float(f) for f in sweep.signal_band_Hz]
+        if sweep.noise_over_whole_record:
+            whole_record.append(direction)
         if sweep.far_measured.any() and not sweep.noise_known:
             unknown.append(direction)
         far[direction] = sweep.far
@@ -224,6 +241,7 @@ def summarize(run: RunData) -> dict[str, Any]:
         "points": points,
         "noise_unknown": unknown,
         "noise_band_Hz": noise_band,
+        "noise_over_whole_record": whole_record,
         "rows": rows,
     }
 
@@ -261,11 +279,17 @@ def format_summary(summary: dict[str, Any]) -> str:
             f"{khz(r['detuning_Hz']):>10} {khz(r['expected_output_Hz']):>10} {tr:>10} "
             f"{signal:>10} {gain:>7}  {r['conversion']}"
         )
+    whole = set(summary.get("noise_over_whole_record", []))
+    unknown = set(summary.get("noise_unknown", []))
     bands = ", ".join(
-        f"{d} {lo / 1e3:.2f}-{hi / 1e3:.2f} kHz"
+        f"{d}: no noise estimate, E_sig = E_far"
+        if d in unknown
+        else f"{d}: the whole record, its pre-trigger too short for a band's noise"
+        if d in whole
+        else f"{d} {lo / 1e3:.2f}-{hi / 1e3:.2f} kHz"
         for d, (lo, hi) in summary.get("noise_band_Hz", {}).items()
     )
-    if summary["rows"]:
+    if any(r.get("signal_transmission") is not None for r in summary["rows"]):
         lines.append(
             "E_far/E_in: the far end's energy over the entry's, whole records (noise included); "
             f"E_sig/E_in: the far end's signal, its energy in the band where it can be ({bands}) "

@@ -83,7 +83,10 @@ class AmplitudeSweep:
     ``reference``: the linear reference (E_far / E_entry, NaN without one);
     ``reference_is_bound``: it is such a bound, so the gains are lower bounds;
     ``far_measured [A]``: the far record was measured (whether or not a peak was found);
-    ``noise_known``: a measured far record had pre-trigger samples to estimate its noise."""
+    ``noise_known``: a measured far record had pre-trigger samples to estimate its noise;
+    ``noise_over_whole_record``: its pre-trigger was too short to know the noise within the
+    signal band (:data:`analysis.noise_floor.MIN_BAND_DOF`), so ``signal_band_Hz`` is the whole
+    record, 0..Nyquist."""
 
     direction: str
     amplitudes: NDArray[np.float64]
@@ -108,6 +111,7 @@ class AmplitudeSweep:
     reference_is_bound: bool
     far_measured: NDArray[np.bool_]
     noise_known: bool
+    noise_over_whole_record: bool = False
 
 
 def cylinder_index(scan: ScanData, number: int) -> int | None:
@@ -172,8 +176,9 @@ def amplitude_sweep(scan: ScanData, chain: ChainInfo) -> AmplitudeSweep:
         scan.f_center_Hz, scan.direction, onset, cutoff, burst_sigma_f_Hz(scan)
     )
     level_band = f_range
-    if band_dof(scan.time_s, rate, level_band) < MIN_BAND_DOF:  # a short pre-trigger: the
-        sig_band = level_band = (0.0, rate / 2.0)  # whole record decides, as before
+    whole = band_dof(scan.time_s, rate, level_band) < MIN_BAND_DOF
+    if whole:  # a short pre-trigger: the whole record decides, as before
+        sig_band = level_band = (0.0, rate / 2.0)
     e_far = band_energy(v_far, rate, sig_band)  # for the noise floor and its bound
     e_entry = signal_energy(v_entry, rate)
     far_measured = np.all(np.isfinite(v_far), axis=-1)
@@ -219,6 +224,7 @@ def amplitude_sweep(scan: ScanData, chain: ChainInfo) -> AmplitudeSweep:
         reference_is_bound=is_bound,
         far_measured=far_measured,
         noise_known=bool(np.any(np.isfinite(noise[far_measured]))),
+        noise_over_whole_record=whole,
     )
 
 

@@ -13,8 +13,9 @@ is one, the floor is the tightest such bound, drawn "at most", and the gains are
 cylinder's output peak (kHz) per amplitude, with the input frequency (dashed) and the far
 cylinder's band edge that the conversion heads for (dotted). The far end always has a largest
 line: only the points whose verdict (:func:`analysis.summary.conversion_verdict`, with the gain
-over the smallest amplitude) is a conversion are filled; the others (a linear leak, a line
-within 2 % of the input, undetermined) are hollow grey, "not converted". Before, a 10 nm RTL
+over the smallest amplitude) is a conversion are filled; those the run cannot tell
+("undetermined": a lower-bound gain) are hollow in their direction's colour; the others (a
+linear leak, a line within 2 % of the input) hollow grey, "not converted". Before, a 10 nm RTL
 leak at 8.0 kHz (E_far/E_in 7e-8) was drawn as the converted points are.
 """
 
@@ -88,14 +89,23 @@ def plot_regime(sweeps: Mapping[str, AmplitudeSweep]) -> Figure:
                              label=f"{d.upper()} linear floor {'at most ' if bound else ''}"
                              f"{floor:.2g}")  # fmt: skip
             fo = np.isfinite(sw.output_Hz) & (amps > 0)
-            conv = fo & np.array([is_conversion(r["conversion"]) for r in summary_rows(sw)])
+            verdicts = [r["conversion"] for r in summary_rows(sw)]
+            conv = fo & np.array([is_conversion(v) for v in verdicts])
+            # the run cannot tell (a lower-bound gain): neither converted nor not (a reviewer:
+            # it was drawn "not converted")
+            unsure = fo & np.array([v == "undetermined" for v in verdicts])
             marker = MARKERS.get(d, "o-")[0]
             ax_f.plot(amps[fo], sw.output_Hz[fo] / 1e3, "-", color=colour, lw=1, alpha=0.5)
             if conv.any():
                 ax_f.plot(amps[conv], sw.output_Hz[conv] / 1e3, marker, color=colour, ls="none",
                           label=f"{d.upper()} far-end peak, converted")  # fmt: skip
-            if (fo & ~conv).any():
-                ax_f.plot(amps[fo & ~conv], sw.output_Hz[fo & ~conv] / 1e3, marker, mfc="none",
+            if unsure.any():
+                ax_f.plot(amps[unsure], sw.output_Hz[unsure] / 1e3, marker, mfc="none",
+                          mec=colour, ls="none",
+                          label=f"{d.upper()} far-end peak, undetermined")  # fmt: skip
+            if (fo & ~conv & ~unsure).any():
+                rest = fo & ~conv & ~unsure
+                ax_f.plot(amps[rest], sw.output_Hz[rest] / 1e3, marker, mfc="none",
                           mec="grey", ls="none",
                           label=f"{d.upper()} largest far-end line, not converted")  # fmt: skip
         ax_t.set_xscale("log")

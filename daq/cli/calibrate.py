@@ -122,10 +122,17 @@ def _check(data, spec, result, figures: Path | None) -> dict[str, float | None]:
     def f(x: float) -> float | None:
         return x if math.isfinite(x) else None
 
+    nf = after.n_noise_floor  # far records at the noise floor: bounds, not compared
+    floor_note = (
+        f", {nf} far record{'' if nf == 1 else 's'} at the noise floor left out" if nf else ""
+    )
+    noise_alone = after.spectral_noise_figure
+    alone = f", noise alone {noise_alone:.3f}" if math.isfinite(noise_alone) else ""
     print(
-        f"DEM prediction of all {after.counts.get('ok', 0)} compared points (linear and "
-        f"nonlinear), figure of merit: {before.figure_of_merit:.3f} from the start values, "
-        f"{after.figure_of_merit:.3f} from the fit (time-domain {before.time_figure:.3f} -> "
+        f"DEM prediction of {after.counts.get('ok', 0) - nf} compared points (linear and "
+        f"nonlinear{floor_note}), figure of merit: {before.figure_of_merit:.3f} from the start "
+        f"values, {after.figure_of_merit:.3f} from the fit{alone} (time-domain "
+        f"{before.time_figure:.3f} -> "
         f"{after.time_figure:.3f}, noise floor "
         + (f"{after.noise_figure:.3f})" if math.isfinite(after.noise_figure) else "n/a)")
     )

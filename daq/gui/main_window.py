@@ -117,8 +117,9 @@ class MainWindow(QMainWindow):
         #: the bench panel's "UNSAFE" of a run that could not confirm its safe state: up until
         #: a safe state is confirmed (:meth:`_clear_unsafe_mark`), whatever else the panel says
         self._unsafe_mark: str | None = None
-        #: the bench file text the UNSAFE run ran on: only that bench's read-back takes it down
-        self._unsafe_bench: str | None = None
+        #: the instruments the UNSAFE run ran on (:func:`_bench_identity`): only their
+        #: read-back takes it down
+        self._unsafe_bench: tuple[str, ...] | None = None
         #: a run file opened during a run: read and shown once the run has ended
         self._open_after_run: tuple[Path, Callable[[bool], None] | None] | None = None
         self.live = LiveData()
@@ -961,7 +962,7 @@ class MainWindow(QMainWindow):
 
             unconfirmed = list(d.get("unconfirmed") or [])
             # what to switch off named here: a next run replaces the run's last line
-            self._unsafe_bench = self.bench_file.text if self.bench_file is not None else None
+            self._unsafe_bench = _bench_identity(self.bench_file)
             self._unsafe_mark = f"✗ UNSAFE: the safe state of {Path(d['path']).name} was not " + (
                 f"confirmed; {unsafe_instruction(unconfirmed)}"
                 if unconfirmed
@@ -1016,11 +1017,14 @@ class MainWindow(QMainWindow):
         reported on; and another bench's read-back took it down too (a reviewer)."""
         if self._unsafe_mark is None:
             return
-        here = self.bench_file.text if self.bench_file is not None else None
-        if self._unsafe_bench is not None and here != self._unsafe_bench:
+        if (
+            self._unsafe_bench is not None
+            and _bench_identity(self.bench_file) != self._unsafe_bench
+        ):
             self.log(
-                "UNSAFE still holds: that read-back was of another bench than the one the "
-                "UNSAFE run ran on; open that bench file and confirm its safe state",
+                "UNSAFE still holds: that read-back was of other instruments than the UNSAFE "
+                "run's (its generator and stage); open a bench file naming them and confirm "
+                "their safe state",
                 "error",
             )
             return
@@ -1253,6 +1257,19 @@ def _not_confirmed_off(instruments: Any, channels: list[int]) -> list[str]:
     except Exception as exc:
         said.append(f"stage: cannot read whether it moves ({_first(exc)})")
     return said
+
+
+def _bench_identity(bench_file: Any) -> tuple[str, ...] | None:
+    """What a safe state is of: the simulated bench, or a lab bench's generator and stage by
+    their addresses (as written, case aside: no name lookup in the window's thread). A bench
+    file edited in a comment, or renamed, names the same instruments (a reviewer: the mark
+    had been tied to the file's text)."""
+    if bench_file is None:
+        return None
+    b = bench_file.bench
+    if b.simulation is not None:
+        return ("simulated",)
+    return ("lab", b.generator.resource.strip().upper(), b.stage.resource.strip().upper())
 
 
 def _first(exc: BaseException) -> str:

@@ -161,3 +161,29 @@ def test_cli_refusal_is_one_line_with_exit_2(
     assert biafc(["calibrate", str(path)]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "at least 5 cylinders" in err
+
+
+def test_calibrates_count_of_compared_points_leaves_out_the_noise_floor(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A second reader: calibrate said "all 62 compared points" where biafc compare, on the
+    same file and chain, said "61 compared, 1 far record at the noise floor"."""
+    import math
+    from types import SimpleNamespace
+
+    import analysis.compare_report
+    from daq.cli import calibrate as cli
+
+    cmp = SimpleNamespace(
+        counts={"ok": 62}, n_noise_floor=1, figure_of_merit=0.3, time_figure=0.4,
+        noise_figure=0.39, spectral_noise_figure=0.27,
+    )  # fmt: skip
+    monkeypatch.setattr(
+        analysis.compare_report, "compare_run",
+        lambda *a, **k: SimpleNamespace(comparison=cmp),
+    )  # fmt: skip
+    result = SimpleNamespace(spec=None, names=(), stroke_m_per_V=math.nan)
+    cli._check(None, None, result, None)
+    out = capsys.readouterr().out
+    assert "DEM prediction of 61 compared points" in out and "1 far record at the noise" in out
+    assert "noise alone 0.270" in out

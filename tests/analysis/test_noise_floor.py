@@ -319,3 +319,35 @@ def test_pure_noise_is_rarely_resolved_even_with_a_short_pre_trigger(small_sweep
     assert band_dof(t, only_noise.sample_rate_Hz, sweep.f_range_Hz) < MIN_BAND_DOF
     assert sweep.signal_band_Hz == (0.0, only_noise.sample_rate_Hz / 2)  # the whole record
     assert np.mean(~sweep.at_noise_floor) < 0.01
+
+
+def test_an_offset_on_the_pre_trigger_is_not_read_as_noise_in_the_band() -> None:
+    """A reviewer: the pre-trigger's mean was kept, so a DC offset on its short stretch leaked
+    into the band and read as noise there (5 sigma of offset took a perfect model's noise
+    reference in biafc compare from 0.17 to 0.96)."""
+    from analysis.noise_floor import band_noise_energy
+
+    rate, n = 500e3, 12_500
+    t = (np.arange(n) - 500) / rate  # 1 ms before the trigger
+    rng = np.random.default_rng(5)
+    noise = rng.normal(0.0, 1e-4, (200, n))
+    band = (6.7e3, 10.3e3)
+    plain = band_noise_energy(noise, t, rate, band, (3.9e3, 13.3e3))
+    offset = band_noise_energy(noise + 5e-4, t, rate, band, (3.9e3, 13.3e3))
+    assert np.median(offset / plain) == pytest.approx(1.0, abs=0.05)
+
+
+def test_the_summary_says_when_the_whole_record_set_the_noise(tmp_path: Path) -> None:
+    """A reviewer: after the whole-record fallback the line read "in the band where it can be
+    (ltr 0.00-100.00 kHz)", and it was printed when no row had an E_sig at all."""
+    protocol = tmp_path / "short_pre.yaml"  # 0.3 ms before the trigger: 5.6 degrees of freedom
+    protocol.write_text(PROTOCOL.replace("pre_trigger: 1 ms", "pre_trigger: 0.3 ms"))
+    out = tmp_path / "short_pre.h5"
+    assert run_protocol([str(protocol), "--out", str(out), "-q"]) == 0
+    summary = summarize(read_run(out))
+    text = format_summary(summary)
+    assert summary["noise_over_whole_record"] == ["ltr", "rtl"]
+    assert "ltr: the whole record, its pre-trigger too short for a band's noise" in text
+    assert "0.00-250.00 kHz" not in text
+    no_signal = {**summary, "rows": [{**r, "signal_transmission": None} for r in summary["rows"]]}
+    assert "E_sig/E_in: the far end's signal" not in format_summary(no_signal)

@@ -128,10 +128,15 @@ def test_a_new_run_that_ends_unsafe_again_keeps_the_mark_naming_its_file(
     assert not any("taken down" in line for line in win.log_view.lines)
 
 
-def test_another_benchs_read_back_does_not_take_unsafe_down(qtbot: Any, tmp_path: Path) -> None:
-    """A reviewer: after an UNSAFE end, opening another bench file and connecting read back
-    that bench's outputs and took down the first bench's UNSAFE."""
-    from protocols.bench import load_bench
+def test_unsafe_goes_only_with_a_read_back_of_the_same_instruments(
+    qtbot: Any, tmp_path: Path
+) -> None:
+    """A reviewer: after an UNSAFE end, another bench file's read-back took the mark down; and
+    a fix that tied the mark to the bench file's text kept it up after the same bench file
+    had only a comment added. The mark belongs to the instruments: the simulated bench, or a
+    lab bench's generator and stage by their addresses."""
+    from daq.gui.main_window import _bench_identity
+    from protocols.bench import load_bench, parse_bench
 
     calls: list[int] = []
 
@@ -149,19 +154,32 @@ def test_another_benchs_read_back_does_not_take_unsafe_down(qtbot: Any, tmp_path
     win.show()
     win.run_panel.out_edit.setText(str(tmp_path / "u.h5"))
     connect(qtbot, win)
-    first = win.bench_file
     with qtbot.waitSignal(win.run_finished, timeout=60_000) as blocker:
         win.run_panel.start_button.click()
     assert blocker.args == ["unsafe"]
     label = win.bench_panel.status_label
+    assert win._unsafe_bench == ("simulated",)
     qtbot.waitUntil(lambda: win.bench_panel.connect_button.isEnabled(), timeout=10_000)
-    other = tmp_path / "other_bench.yaml"
-    other.write_text(load_bench().text.replace("name: simulated bench", "name: bench two", 1))
-    assert win.load_bench(other)
-    connect(qtbot, win)  # another bench's outputs read back off
-    assert label.text().startswith("✗ UNSAFE")
-    assert any("another bench than the one the UNSAFE run ran on" in line
-               for line in win.log_view.lines[-4:])  # fmt: skip
-    assert first is not None and win.load_bench(first.path)  # the UNSAFE run's own bench
-    connect(qtbot, win)  # its outputs read back off: now it goes
+    edited = tmp_path / "same_bench.yaml"  # the same bench file, a comment added
+    edited.write_text("# checked the amplifier\n" + load_bench().text)
+    assert win.load_bench(edited)
+    connect(qtbot, win)  # the same (simulated) instruments read back off: the mark goes
     assert not label.text().startswith("✗ UNSAFE")
+
+    # a lab bench: its generator and stage by address
+    lab = Path(__file__).resolve().parents[2] / "protocols" / "benches" / "lab_bench.yaml"
+    a = parse_bench(lab.read_text(), str(lab))
+    commented = parse_bench("# a comment\n" + lab.read_text(), str(lab))
+    other = parse_bench(
+        lab.read_text().replace("TCPIP0::192.168.1.10::INSTR", "TCPIP0::192.168.1.11::INSTR"),
+        str(lab),
+    )
+    assert _bench_identity(a) == _bench_identity(commented) != _bench_identity(other)
+    win._unsafe_mark, win._unsafe_bench = "✗ UNSAFE: test", _bench_identity(a)
+    win.bench_file = other
+    win._clear_unsafe_mark("taken down")
+    assert win._unsafe_mark is not None
+    assert "other instruments than the UNSAFE run's" in win.log_view.lines[-1]
+    win.bench_file = commented
+    win._clear_unsafe_mark("taken down")
+    assert win._unsafe_mark is None

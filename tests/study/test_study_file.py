@@ -344,3 +344,23 @@ def test_the_transit_check_builds_no_chain_where_the_window_is_long_enough(
     setup = StudySetup(study, default_chain_spec().model_dump_json(), table.names)
     monkeypatch.setattr(sim_backend.dem.chain, "build_chain", no_build)
     assert check_transit(setup, table) is None
+
+
+def test_the_transit_refusal_shows_a_latin_hypercubes_values_readably(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A second reader: the refusal printed raw floats ("diameter = 0.015337945819433435 m")."""
+    import re
+
+    text = (
+        TINY.replace("sampling: grid", "sampling: {latin_hypercube: 6, seed: 2}")
+        .replace("{from: 12 mm, to: 15 mm, count: 3}", "{from: 12 mm, to: 15 mm}")
+        .replace("[3 N, 6 N]", "{from: 0.5 N, to: 1 N}")
+        .replace("  n_cylinders: 5", "  n_cylinders: 31")
+        .replace("duration: 2 ms", "duration: 1.2 ms")
+    )
+    p = tmp_path / "s.yaml"
+    p.write_text(text)
+    assert main(["study", str(p), "--dry-run", "--out", str(tmp_path / "s.h5")]) == 2
+    err = capsys.readouterr().err
+    assert re.search(r"diameter = 0\.0\d{1,4} m, preload = 0\.\d{1,4} N,", err), err
