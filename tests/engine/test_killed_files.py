@@ -226,6 +226,24 @@ _KILL_HOOK = textwrap.dedent(
 )
 
 
+def _killed_after_records(proto_file: Path, folder: Path, n: int) -> Path:
+    """``folder/killed.h5``: a run_protocol process of ``proto_file`` on the simulated bench
+    (seed 5), SIGKILLed once its ``n``-th point's records are flushed, before the file's flush
+    that marks that point done (:data:`_KILL_HOOK`)."""
+    hook = folder / "hook"
+    hook.mkdir(exist_ok=True)
+    (hook / "sitecustomize.py").write_text(_KILL_HOOK)
+    killed = folder / "killed.h5"
+    env = dict(os.environ, KILL_AFTER_RECORDS=str(n), PYTHONPATH=f"{hook}{os.pathsep}{ROOT}")
+    proc = subprocess.run(
+        [sys.executable, "-m", "daq.cli.run_protocol", str(proto_file), "--out", str(killed),
+         "--seed", "5", "-q"],
+        env=env, cwd=ROOT, capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert proc.returncode == -9, proc.stderr
+    return killed
+
+
 def test_a_kill_between_a_points_records_and_its_done_mark_loses_no_point(
     proto_file, tmp_path
 ) -> None:
@@ -233,19 +251,9 @@ def test_a_kill_between_a_points_records_and_its_done_mark_loses_no_point(
     writes the superblock's end-of-file address and marks the point done. Killed between the
     two, the file held chunks past that address; --resume (or biafc repair) allocated over
     them and lost every measured point, or ended 'complete' with a file no tool read."""
-    hook = tmp_path / "hook"
-    hook.mkdir()
-    (hook / "sitecustomize.py").write_text(_KILL_HOOK)
     reference = tmp_path / "reference.h5"
     assert rp.main([str(proto_file), "--out", str(reference), "--seed", "5", "-q"]) == 0
-    killed = tmp_path / "killed.h5"
-    env = dict(os.environ, KILL_AFTER_RECORDS="3", PYTHONPATH=f"{hook}{os.pathsep}{ROOT}")
-    proc = subprocess.run(
-        [sys.executable, "-m", "daq.cli.run_protocol", str(proto_file), "--out", str(killed),
-         "--seed", "5", "-q"],
-        env=env, cwd=ROOT, capture_output=True, text=True, timeout=120,
-    )  # fmt: skip
-    assert proc.returncode == -9, proc.stderr
+    killed = _killed_after_records(proto_file, tmp_path, 3)
     assert rp.main(["--resume", str(killed), "-q"]) == 0
     a, b = read_run(reference), read_run(killed)
     assert b.status == "complete"
@@ -261,17 +269,7 @@ def test_a_killed_sessions_missing_dem_runs_are_said_in_the_file(proto_file, tmp
     are never recorded; after the resume the file listed the resume's runs as if they were
     all, its worst error estimate missing the killed session's. Now it says how many are
     missing."""
-    hook = tmp_path / "hook"
-    hook.mkdir()
-    (hook / "sitecustomize.py").write_text(_KILL_HOOK)
-    killed = tmp_path / "killed.h5"
-    env = dict(os.environ, KILL_AFTER_RECORDS="5", PYTHONPATH=f"{hook}{os.pathsep}{ROOT}")
-    proc = subprocess.run(
-        [sys.executable, "-m", "daq.cli.run_protocol", str(proto_file), "--out", str(killed),
-         "--seed", "5", "-q"],
-        env=env, cwd=ROOT, capture_output=True, text=True, timeout=120,
-    )  # fmt: skip
-    assert proc.returncode == -9, proc.stderr
+    killed = _killed_after_records(proto_file, tmp_path, 5)
     assert rp.main(["--resume", str(killed), "-q"]) == 0
     sim = read_run(killed).simulation
     assert sim["dem_runs"] == 3  # ltr at 2 Vpp, rtl at 1 and 2 Vpp: this session's

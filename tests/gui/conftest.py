@@ -80,6 +80,41 @@ def make_assembler(read_sleep_s: float = 0.0) -> Callable[[Any, int | None], Any
     return sim
 
 
+def silent_generator(
+    runs: int | None = None, read_sleep_s: float = 0.0
+) -> Callable[[Any, int | None], Any]:
+    """An assembler whose generator goes silent mid-run (after 3 acquisitions), so that the run
+    ends UNSAFE: on its first ``runs`` connects (None: every one), a plain simulated bench after
+    them; each record taking ``read_sleep_s`` longer."""
+    calls: list[int] = []
+
+    def bench(bf: Any, seed: int | None) -> Any:
+        calls.append(1)
+        faults = {"generator_silent": True, "after_acquisitions": 3}
+        silent = runs is None or len(calls) <= runs
+        inst = connect_bench(bf, seed=seed, faults=faults if silent else None)
+        if read_sleep_s:
+            inst.digitiser = SlowDigitiser(inst.digitiser, read_sleep_s)
+        return inst
+
+    return bench
+
+
+def unsafe_window(qtbot: Any, out: Path, assembler: Callable[[Any, int | None], Any]) -> MainWindow:
+    """The window, connected through ``assembler``, after a run into ``out`` that ended
+    UNSAFE (asserted)."""
+    win = MainWindow(None, SMOKE, assembler=assembler)
+    win.confirm_close = lambda: True  # type: ignore[method-assign]
+    qtbot.addWidget(win)
+    win.show()
+    win.run_panel.out_edit.setText(str(out))
+    connect(qtbot, win)
+    with qtbot.waitSignal(win.run_finished, timeout=60_000) as blocker:
+        win.run_panel.start_button.click()
+    assert blocker.args == ["unsafe"]
+    return win
+
+
 def _window_output(tmp_path: Path) -> Path:
     """The run file of :func:`window`: in the test's folder, or, when the screenshots go to the
     docs, ``runs/smoke_run.h5`` under the working folder (ignored by git), so that the pictures

@@ -7,11 +7,10 @@ import datetime as dt
 from pathlib import Path
 from typing import Any
 
-from daq.connect import connect_bench
 from daq.gui.main_window import MainWindow
 from protocols.runfile import read_run
 
-from .conftest import SMOKE, connect
+from .conftest import silent_generator, unsafe_window
 
 
 def _lines(log: Path) -> list[tuple[dt.datetime, str, str]]:
@@ -52,21 +51,8 @@ def test_each_run_log_holds_its_own_run_in_order_ending_with_its_outcome(
     own run's outcome (the complete run's log ended with the window's note that the earlier
     UNSAFE was taken down, after the run's outcome), and neither has the other's lines."""
 
-    def bench(bf: Any, seed: int | None) -> Any:  # the generator goes silent mid-run
-        return connect_bench(
-            bf, seed=seed, faults={"generator_silent": True, "after_acquisitions": 3}
-        )
-
-    win = MainWindow(None, SMOKE, assembler=bench)
-    win.confirm_close = lambda: True  # type: ignore[method-assign]
-    qtbot.addWidget(win)
-    win.show()
     unsafe, good = tmp_path / "u.h5", tmp_path / "ok.h5"
-    win.run_panel.out_edit.setText(str(unsafe))
-    connect(qtbot, win)
-    with qtbot.waitSignal(win.run_finished, timeout=60_000) as blocker:
-        win.run_panel.start_button.click()
-    assert blocker.args == ["unsafe"]
+    win = unsafe_window(qtbot, unsafe, silent_generator())  # the generator goes silent
     first = _check(unsafe.with_suffix(".log"), unsafe, win)
     assert first[-1].startswith("run UNSAFE") and "SWITCH OFF BY HAND" in first[-1]
     before = unsafe.with_suffix(".log").read_text(encoding="utf-8")

@@ -6,39 +6,25 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from daq.connect import connect_bench
-from daq.gui.main_window import MainWindow
-
-from .conftest import SMOKE, SlowDigitiser, connect, wait_until
+from .conftest import connect, silent_generator, unsafe_window, wait_until
 
 
 def test_reconnect_keeps_unsafe_until_every_output_reads_back_off(
     qtbot: Any, tmp_path: Path
 ) -> None:
     calls: list[int] = []
+    unsafe_first = silent_generator(runs=1)  # the run ends UNSAFE
 
     def bench(bf: Any, seed: int | None) -> Any:
         calls.append(1)
-        if len(calls) == 1:  # the generator goes silent mid-run: the run ends UNSAFE
-            return connect_bench(
-                bf, seed=seed, faults={"generator_silent": True, "after_acquisitions": 3}
-            )
         if len(calls) == 2:
             raise RuntimeError("VISA: no such resource")
-        inst = connect_bench(bf, seed=seed)
+        inst = unsafe_first(bf, seed)
         if len(calls) == 3:  # the output the run could not switch off is still on
             inst.world._inst.generator.channels[1].output_on = True
         return inst
 
-    win = MainWindow(None, SMOKE, assembler=bench)
-    win.confirm_close = lambda: True  # type: ignore[method-assign]
-    qtbot.addWidget(win)
-    win.show()
-    win.run_panel.out_edit.setText(str(tmp_path / "u.h5"))
-    connect(qtbot, win)
-    with qtbot.waitSignal(win.run_finished, timeout=60_000) as blocker:
-        win.run_panel.start_button.click()
-    assert blocker.args == ["unsafe"]
+    win = unsafe_window(qtbot, tmp_path / "u.h5", bench)
     label = win.bench_panel.status_label
     assert label.text().startswith("✗ UNSAFE")
     qtbot.waitUntil(lambda: win.bench_panel.connect_button.isEnabled(), timeout=10_000)
@@ -65,22 +51,8 @@ def test_a_new_run_keeps_unsafe_until_its_end_confirms_the_safe_state(
     """Start took the last run's UNSAFE down before anything was read back: the panel said
     "connected" while the output the run could not switch off had not been confirmed off."""
 
-    def bench(bf: Any, seed: int | None) -> Any:  # the generator goes silent mid-run
-        inst = connect_bench(
-            bf, seed=seed, faults={"generator_silent": True, "after_acquisitions": 3}
-        )
-        inst.digitiser = SlowDigitiser(inst.digitiser, 0.05)
-        return inst
-
-    win = MainWindow(None, SMOKE, assembler=bench)
-    win.confirm_close = lambda: True  # type: ignore[method-assign]
-    qtbot.addWidget(win)
-    win.show()
-    win.run_panel.out_edit.setText(str(tmp_path / "u.h5"))
-    connect(qtbot, win)
-    with qtbot.waitSignal(win.run_finished, timeout=60_000) as blocker:
-        win.run_panel.start_button.click()
-    assert blocker.args == ["unsafe"]
+    # the generator goes silent mid-run
+    win = unsafe_window(qtbot, tmp_path / "u.h5", silent_generator(read_sleep_s=0.05))
     label = win.bench_panel.status_label
     # what to switch off is named on the panel itself: the next run replaces the run's line
     assert label.text().startswith("✗ UNSAFE") and "u.h5" in label.text()
@@ -103,19 +75,7 @@ def test_a_new_run_keeps_unsafe_until_its_end_confirms_the_safe_state(
 def test_a_new_run_that_ends_unsafe_again_keeps_the_mark_naming_its_file(
     qtbot: Any, tmp_path: Path
 ) -> None:
-    def bench(bf: Any, seed: int | None) -> Any:
-        return connect_bench(
-            bf, seed=seed, faults={"generator_silent": True, "after_acquisitions": 3}
-        )
-
-    win = MainWindow(None, SMOKE, assembler=bench)
-    win.confirm_close = lambda: True  # type: ignore[method-assign]
-    qtbot.addWidget(win)
-    win.show()
-    win.run_panel.out_edit.setText(str(tmp_path / "u.h5"))
-    connect(qtbot, win)
-    with qtbot.waitSignal(win.run_finished, timeout=60_000):
-        win.run_panel.start_button.click()
+    win = unsafe_window(qtbot, tmp_path / "u.h5", silent_generator())
     qtbot.waitUntil(lambda: win.run_panel.start_button.isEnabled(), timeout=10_000)
     label = win.bench_panel.status_label
     assert label.text().startswith("✗ UNSAFE")
@@ -138,25 +98,7 @@ def test_unsafe_goes_only_with_a_read_back_of_the_same_instruments(
     from daq.gui.main_window import _bench_identity
     from protocols.bench import load_bench, parse_bench
 
-    calls: list[int] = []
-
-    def bench(bf: Any, seed: int | None) -> Any:
-        calls.append(1)
-        if len(calls) == 1:  # the generator goes silent mid-run: the run ends UNSAFE
-            return connect_bench(
-                bf, seed=seed, faults={"generator_silent": True, "after_acquisitions": 3}
-            )
-        return connect_bench(bf, seed=seed)
-
-    win = MainWindow(None, SMOKE, assembler=bench)
-    win.confirm_close = lambda: True  # type: ignore[method-assign]
-    qtbot.addWidget(win)
-    win.show()
-    win.run_panel.out_edit.setText(str(tmp_path / "u.h5"))
-    connect(qtbot, win)
-    with qtbot.waitSignal(win.run_finished, timeout=60_000) as blocker:
-        win.run_panel.start_button.click()
-    assert blocker.args == ["unsafe"]
+    win = unsafe_window(qtbot, tmp_path / "u.h5", silent_generator(runs=1))
     label = win.bench_panel.status_label
     assert win._unsafe_bench == ("simulated",)
     qtbot.waitUntil(lambda: win.bench_panel.connect_button.isEnabled(), timeout=10_000)

@@ -205,6 +205,19 @@ DRIVE_TOO_BIG = [
 ]
 
 
+def _refused(tmp_path: Path, text: str, capsys: pytest.CaptureFixture[str]) -> tuple[Path, str]:
+    """Run the study ``text`` (as ``tmp_path/s.yaml``): refused, exit 2, in one line, no output
+    made. Returns the study file's path and that line."""
+    p = tmp_path / "s.yaml"
+    p.write_text(text)
+    out = tmp_path / "s.h5"
+    assert main(["study", str(p), "--workers", "0", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1, err
+    assert not out.exists()
+    return p, err
+
+
 @pytest.mark.parametrize(("edit", "lineno", "field", "whys"), DRIVE_TOO_BIG)
 def test_a_record_that_cannot_hold_the_drive_is_refused_before_any_task(
     tmp_path: Path,
@@ -223,16 +236,10 @@ def test_a_record_that_cannot_hold_the_drive_is_refused_before_any_task(
     if "shape: narrowband" in text:
         text = text.replace("duration: 2 ms", "duration: 0.5 ms")
     assert text != TINY
-    p = tmp_path / "s.yaml"
-    p.write_text(text)
-    out = tmp_path / "s.h5"
-    assert main(["study", str(p), "--workers", "0", "--out", str(out)]) == 2
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1, err
+    p, err = _refused(tmp_path, text, capsys)
     assert f"{p}:{lineno}: {field}: " in err, err
     for why in whys:
         assert why in err, err
-    assert not out.exists()
 
 
 def test_a_record_that_holds_every_burst_is_accepted() -> None:
@@ -306,18 +313,12 @@ def test_a_window_that_cannot_hold_the_transit_to_the_far_end_is_refused(
         .replace("[3 N, 6 N]", "[0.5 N, 6 N]")
         .replace("duration: 2 ms", "duration: 1.2 ms")
     )
-    p = tmp_path / "s.yaml"
-    p.write_text(text)
-    out = tmp_path / "s.h5"
-    assert main(["study", str(p), "--workers", "0", "--out", str(out)]) == 2
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1, err
+    p, err = _refused(tmp_path, text, capsys)
     assert f"{p}:11: simulation.duration: 1.2 ms cannot hold the rtl burst" in err, err
     assert "preload = 0.5 N" in err and "over 30 contacts" in err and "give at least" in err
-    assert not out.exists()
     ok = tmp_path / "ok.yaml"
     ok.write_text(text.replace("duration: 1.2 ms", "duration: 2 ms"))
-    assert main(["study", str(ok), "--dry-run", "--out", str(out)]) == 0
+    assert main(["study", str(ok), "--dry-run", "--out", str(tmp_path / "s.h5")]) == 0
 
 
 def test_the_transit_check_builds_no_chain_where_the_window_is_long_enough(
