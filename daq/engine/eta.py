@@ -60,8 +60,9 @@ SECONDS_PER_MODE_STEP = 25e-9
 #: first use of the model on a machine: numba compiles the kernel (then cached on disk); measured
 #: 2026-11-25 on a 2-core host under a load of 2.2-2.8: 6.3-6.6 s, and 7.4 s to the first point of
 #: a cold ``run_protocol smoke`` (20-26 s before the kernel's chunks left numba's ``parallel=``;
-#: docs/performance.md section 3)
-COMPILE_S = 8.0
+#: docs/performance.md section 3); 2026-11-28, with the branch-free pass 2 (more code to compile),
+#: a second reader measured 10.4-12.3 s at a load of 0.4-1.3
+COMPILE_S = 12.0
 #: simulated bench, per point and per recorded sample (emulators, noise, digitiser)
 SIM_POINT_S = 2e-3
 SIM_SAMPLE_S = 7e-8
@@ -283,6 +284,11 @@ class EtaEstimator:
         kind = self.arms[self.n_measured]
         if self._first is None:
             self._first = (kind, seconds)  # one-time costs: kept apart while others exist
+            if self.costs.first_extra_s > 0:  # it compiled the model: not a point's rate
+                # (before, its 11 s became every point's until a second of its kind: "ETA
+                # 02:49" with 4 s left; a second reader)
+                self.n_measured += 1
+                return
             bisect.insort(self._times[kind], seconds)
         else:
             first_kind, first_s = self._first

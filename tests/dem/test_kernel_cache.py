@@ -219,3 +219,20 @@ def test_where_the_kernel_is_looked_for_follows_numbas_fallback(
     (there / "sim_backend" / "dem" / "kernel.run_chunks-405.py311.nbi").write_bytes(b"")
     monkeypatch.setattr(kernel_cache, "expected_cache_folder", lambda: there)
     assert kernel_cache.kernel_cached_on_disk()  # looked for where numba keeps it
+
+
+@pytest.mark.parametrize("command", ["regime", "compare", "calibrate", "figures"])
+def test_every_command_that_runs_the_dem_says_when_it_compiles(
+    command: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A second reader: on an empty cache biafc regime, compare, calibrate and figures
+    --alpha-sweep sat 11-13 s silent while the kernel compiled (only simulate, accuracy and
+    stability said so)."""
+    from daq.cli import compile_notice
+    from daq.cli.biafc import main
+
+    installed: list[bool] = []
+    monkeypatch.setattr(compile_notice, "install", lambda stream=None: installed.append(True))
+    with pytest.raises(SystemExit):
+        main([command, "--help"])
+    assert installed == [True]

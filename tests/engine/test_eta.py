@@ -164,3 +164,15 @@ def test_model_compiled_looks_where_the_kernel_is_cached(tmp_path, monkeypatch) 
     assert eta_mod.model_compiled()
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "elsewhere"))
     assert not eta_mod.model_compiled()
+
+
+def test_the_first_point_of_a_cold_run_does_not_set_the_rate() -> None:
+    """A second reader: on an empty compile cache the first point's 11 s (mostly the kernel's
+    compile) became every point's rate until a second point of its kind: "ETA 02:49" with 4 s
+    left."""
+    costs = PointCosts(point_s=0.1, arm_s=0.0, basis="test", first_extra_s=12.0)
+    eta = EtaEstimator(costs, [True] * 16)
+    eta.measured(11.1)  # the compile and the first point
+    assert eta.remaining_s() == pytest.approx(15 * 0.1)
+    eta.measured(0.25)
+    assert eta.remaining_s() == pytest.approx(14 * 0.25)
