@@ -213,7 +213,7 @@ def check_transit(setup: StudySetup, table: CellTable) -> tuple[str, str] | None
     cell's far end holds nothing yet, and its metrics would read as a wave that did not pass.
     ``alpha``'s tilt is left out (it moves the lengths a little, not the bound's order)."""
     from instruments.units import format_quantity
-    from sim_backend.dem.chain import build_chain, crossing_time_upper_s
+    from sim_backend.dem.chain import crossing_time_s, crossing_time_upper_s
 
     study = setup.study
     window = study.simulation.duration
@@ -237,12 +237,12 @@ def check_transit(setup: StudySetup, table: CellTable) -> tuple[str, str] | None
             transit, n, exact = crossing[key]
             if window >= (burst_s + transit) * (1 - 1e-9):
                 continue
+            if worst is not None and burst_s + transit <= worst[0]:
+                continue  # even its bound needs no more than the cell already named
             if not exact:
                 with np.errstate(all="ignore"):  # a thick, short chain's highest modes
-                    chain = build_chain(cell_chain_spec(setup.base_chain_json, params))
-                m0 = float(np.min(chain.m0_kg))
-                per = math.sqrt(m0 / chain.K_lin) if chain.K_lin > 0 else 0.0
-                transit = per * (n - 1)
+                    per = crossing_time_s(cell_chain_spec(setup.base_chain_json, params))
+                transit = per * (n - 1) if math.isfinite(per) else 0.0
                 crossing[key] = (transit, n, True)
             need = burst_s + transit
             if window >= need * (1 - 1e-9) or (worst is not None and need <= worst[0]):

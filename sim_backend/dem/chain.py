@@ -13,7 +13,7 @@ from sim_backend.dem.contact import hertz_beta, linear_stiffness, static_overlap
 from sim_backend.dem.material import Material
 from sim_backend.dem.spec import ChainSpec
 
-__all__ = ["Chain", "build_chain", "contact_beta", "crossing_time_upper_s"]
+__all__ = ["Chain", "build_chain", "contact_beta", "crossing_time_s", "crossing_time_upper_s"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -125,6 +125,27 @@ def crossing_time_upper_s(spec: ChainSpec) -> float:
     )
     k = linear_stiffness(spec.preload, contact_beta(spec))
     return float(np.sqrt(lightest / k)) if k > 0 else float("inf")
+
+
+def crossing_time_s(spec: ChainSpec) -> float:
+    """The chain's fastest contact crossing ``sqrt(min m0 / K)`` (s): the lightest rigid mass
+    over the linearised contact stiffness, :attr:`Chain.m0_kg` and :attr:`Chain.K_lin` of
+    :func:`build_chain` without the other cylinders' modes where the cylinders differ in length
+    only (the shortest is the lightest: a window check of 2000 Latin-hypercube chains took
+    6.6 s building them whole). Inf at a preload of 0 N."""
+    k = linear_stiffness(spec.preload, contact_beta(spec))
+    if not k > 0:
+        return float("inf")
+    if spec.density_factors:
+        m0 = float(np.min(build_chain(spec).m0_kg))
+    else:
+        shortest = float(np.min(spec.lengths_m()))
+        (modes,) = cylinder_modes(
+            [shortest], spec.diameter, [spec.material.to_material()], spec.n_modes,
+            spec.beam_theory,
+        )  # fmt: skip
+        m0 = float(modes.residual_mass_kg)
+    return float(np.sqrt(m0 / k))
 
 
 def build_chain(spec: ChainSpec) -> Chain:
