@@ -224,7 +224,8 @@ def _run(args: argparse.Namespace, setup: Any, table: Any, store: Any, client: A
                 raise_if_stopped()  # a stop signal Python swallowed where it landed
                 progress.update(n_done, detail=f"task {i}")
 
-            if args.workers == 0:
+            if args.workers == 0 or done0 == table.n_cells:  # nothing left: no cluster to
+                # start (1.1 s for a study already complete; a second reader)
                 summary = run_study(setup, table, store, on_task=on_task)
             elif client is not None:
                 with no_worker_notice(client, progress.note):

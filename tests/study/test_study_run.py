@@ -195,3 +195,23 @@ def test_a_study_continued_with_another_cells_per_task_runs_each_cell_once_the_s
         assert f["tasks_earlier/0/wall_s"].shape == (2,)
         ran = np.isfinite(f["tasks/wall_s"][...])
         assert ran.sum() == len({c // then for c in range(4, 12)})
+
+
+def test_a_complete_output_starts_no_cluster(
+    tiny_study: Path, serial_reference: Path, tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
+) -> None:  # fmt: skip
+    """A second reader: a study already complete still started a LocalCluster (1.6 s against
+    0.5 s) to run 0 cells."""
+    import shutil
+
+    import daq.study_runner
+
+    def no_cluster(workers: int) -> Any:
+        raise AssertionError("a cluster was started")
+
+    monkeypatch.setattr(daq.study_runner, "dask_client", no_cluster)
+    out = tmp_path / "complete.h5"
+    shutil.copy(serial_reference, out)
+    assert main(["study", str(tiny_study), "--out", str(out), "-q"]) == 0
+    assert "0 cells run (12 done before)" in capsys.readouterr().err
