@@ -133,13 +133,18 @@ def _fmt(name: str, value: float) -> Any:
 
 
 def _shown(name: str, value: float) -> str:
-    """A parameter's value for a message (4 significant digits, its SI unit): a Latin
-    hypercube's raw floats read "diameter = 0.015337945819433435 m"."""
+    """A parameter's value for a message (4 significant digits, its unit with a prefix): a
+    Latin hypercube's raw floats read "diameter = 0.015337945819433435 m"."""
+    from instruments.units import format_quantity
+
     info = PARAMETERS[name]
     if info.integer:
         return str(round(value))
-    unit = "" if info.dimension == "dimensionless" else f" {info.unit}"
-    return f"{value:.4g}{unit}"
+    if info.dimension == "dimensionless":
+        return f"{value:.4g}"
+    if info.dimension == "force":  # newtons as the study file writes them ("0.5 N", not mN)
+        return f"{value:.4g} N"
+    return format_quantity(value, info.dimension)  # "14.73 mm", "12.35 kHz"
 
 
 def cell_chain_spec(base_json: str, params: dict[str, float]) -> Any:

@@ -179,7 +179,12 @@ def amplitude_sweep(scan: ScanData, chain: ChainInfo) -> AmplitudeSweep:
     whole = band_dof(scan.time_s, rate, level_band) < MIN_BAND_DOF
     if whole:  # a short pre-trigger: the whole record decides, as before
         sig_band = level_band = (0.0, rate / 2.0)
-    e_far = band_energy(v_far, rate, sig_band)  # for the noise floor and its bound
+    # for the noise floor and its bound, the far record's mean removed as the pre-trigger's
+    # is (band_noise_energy): over the whole record an offset had read as signal (pure noise
+    # with a 5 sigma offset stood "resolved" in every record; a reviewer)
+    with np.errstate(invalid="ignore"):
+        v_far_ac = v_far - np.mean(v_far, axis=-1, keepdims=True)
+    e_far = band_energy(v_far_ac, rate, sig_band)
     e_entry = signal_energy(v_entry, rate)
     far_measured = np.all(np.isfinite(v_far), axis=-1)
     with np.errstate(divide="ignore", invalid="ignore"):

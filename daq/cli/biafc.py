@@ -43,7 +43,9 @@ def _load(name: str):  # type: ignore[no-untyped-def]
 
 #: the commands that may run the DEM, so compile its kernel on first use (before, regime, compare,
 #: calibrate and figures --alpha-sweep sat 11-13 s silent on an empty cache; a second reader)
-COMPILING = ("simulate", "accuracy", "stability", "regime", "compare", "calibrate", "figures")
+COMPILING = (
+    "simulate", "accuracy", "stability", "regime", "compare", "calibrate", "figures", "check",
+)  # fmt: skip
 
 
 def main(argv: Sequence[str] | None = None) -> int:

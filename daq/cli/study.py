@@ -201,7 +201,8 @@ def _run(args: argparse.Namespace, setup: Any, table: Any, store: Any, client: A
     done0 = int(store.done().sum())
     if done0:
         print(f"continuing: {done0} of {table.n_cells} cells done already", file=sys.stderr)
-    _compile_first(args.quiet)
+    if done0 < table.n_cells:  # nothing to run, nothing to compile (12 s on an empty cache)
+        _compile_first(args.quiet)
     status = "failed"
     error: Exception | None = None
     t0 = time.perf_counter()

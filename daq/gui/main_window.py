@@ -1267,7 +1267,7 @@ def _bench_identity(bench_file: Any) -> tuple[str, ...] | None:
     if bench_file is None:
         return None
     b = bench_file.bench
-    if b.simulation is not None:
+    if b.simulated:  # (a lab bench file may keep a simulation block: it is not simulated)
         return ("simulated",)
     return ("lab", b.generator.resource.strip().upper(), b.stage.resource.strip().upper())
 

@@ -221,7 +221,7 @@ def test_where_the_kernel_is_looked_for_follows_numbas_fallback(
     assert kernel_cache.kernel_cached_on_disk()  # looked for where numba keeps it
 
 
-@pytest.mark.parametrize("command", ["regime", "compare", "calibrate", "figures"])
+@pytest.mark.parametrize("command", ["regime", "compare", "calibrate", "figures", "check"])
 def test_every_command_that_runs_the_dem_says_when_it_compiles(
     command: str, monkeypatch: pytest.MonkeyPatch
 ) -> None:

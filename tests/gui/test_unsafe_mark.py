@@ -117,6 +117,9 @@ def test_unsafe_goes_only_with_a_read_back_of_the_same_instruments(
         str(lab),
     )
     assert _bench_identity(a) == _bench_identity(commented) != _bench_identity(other)
+    kept_block = parse_bench(lab.read_text() + "simulation: {seed: 3}\n", str(lab))
+    assert not kept_block.bench.simulated  # a lab bench that kept a simulation block
+    assert _bench_identity(kept_block) == _bench_identity(a) != ("simulated",)
     win._unsafe_mark, win._unsafe_bench = "✗ UNSAFE: test", _bench_identity(a)
     win.bench_file = other
     win._clear_unsafe_mark("taken down")

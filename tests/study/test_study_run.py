@@ -211,6 +211,12 @@ def test_a_complete_output_starts_no_cluster(
         raise AssertionError("a cluster was started")
 
     monkeypatch.setattr(daq.study_runner, "dask_client", no_cluster)
+    import daq.cli.study
+
+    def no_compile(quiet: bool) -> None:
+        raise AssertionError("the kernel was compiled for 0 cells")
+
+    monkeypatch.setattr(daq.cli.study, "_compile_first", no_compile)
     out = tmp_path / "complete.h5"
     shutil.copy(serial_reference, out)
     assert main(["study", str(tiny_study), "--out", str(out), "-q"]) == 0
