@@ -41,7 +41,7 @@ from analysis.spatial import spatial_frequency_map
 from protocols.runfile import ChainInfo, RunData
 from sim_backend.dem import ChainSpec, build_chain, quasi_bands
 
-__all__ = ["CompareReport", "compare_run"]
+__all__ = ["CompareReport", "compare_run", "write_compare"]
 
 
 @dataclass
@@ -124,7 +124,7 @@ def compare_run(
     if on_text is not None:
         on_text(report.text())
     if out_dir is not None:
-        _write(report, run, Path(out_dir), on_written)
+        write_compare(report, run, out_dir, on_written)
     return report
 
 
@@ -134,12 +134,16 @@ def _chain_info(chain: Any, run: RunData) -> ChainInfo:
     return ChainInfo.of_model(chain, quasi_bands(chain, min(n_bands, chain.n_modes + 1)))
 
 
-def _write(
+def write_compare(
     report: CompareReport,
     run: RunData,
-    out: Path,
+    out_dir: str | Path,
     on_written: Callable[[str, list[Path]], None] | None = None,
 ) -> None:
+    """Write the figures, ``residuals.csv`` and ``comparison.json`` of a :func:`compare_run`
+    made with ``out_dir=None`` (``run``: the run it compared) into ``out_dir``;
+    ``on_written(name, paths)`` as each figure's files are saved."""
+    out = Path(out_dir)
     from analysis.plots.compare_plot import (
         plot_compare_residuals,
         plot_compare_spatial,
