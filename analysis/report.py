@@ -13,17 +13,21 @@ What is drawn (names without extension; each written as PNG and PDF):
   at the lowest and the highest amplitude measured;
 - ``summary.json`` (and the text returned for printing).
 
+The summary is computed before anything is drawn (drawing takes most of the time: 5 of 5.4 s
+on a ``biafc_sweep`` run): ``on_summary`` gets its text at once, and ``on_written`` each figure
+as its files are saved, so ``biafc figures`` speaks within about a second, not at the end.
+
 Points not measured (partial files) stay NaN and show as the grey hatched background.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from matplotlib.figure import Figure
 
 from analysis.bands import band_edges, far_cylinder, linear_limit_cylinder
 from analysis.spatial import spatial_frequency_map
@@ -33,6 +37,9 @@ from analysis.stft import Stft, stft
 from analysis.summary import format_summary, summarize, write_summary
 from analysis.sweep import AmplitudeSweep, amplitude_sweep
 from protocols.runfile import RunData, ScanData
+
+if TYPE_CHECKING:  # matplotlib is imported once the summary is out (0.3 s)
+    from matplotlib.figure import Figure
 
 #: amplitudes with the far cylinder measured that an amplitude-sweep figure needs
 MIN_SWEEP_AMPLITUDES = 2
@@ -69,32 +76,46 @@ def stft_cylinders(direction: str, n_cylinders: int, count: int = 6) -> list[int
     return nums if direction == "ltr" else nums[::-1]
 
 
-def _save(report: FigureReport, fig: Figure, out: Path, name: str) -> None:
-    from analysis.plots.style import save_figure
+def write_figures(
+    run: RunData,
+    out_dir: str | Path,
+    *,
+    on_summary: Callable[[str], None] | None = None,
+    on_written: Callable[[str, list[Path]], None] | None = None,
+) -> FigureReport:
+    """Write every figure ``run`` supports and ``summary.json`` into ``out_dir``.
 
-    report.figures[name] = save_figure(fig, out, name)
+    ``on_summary(text)`` is called with the summary's text before any figure is drawn; the
+    figures left out are known only once drawn, so that text has no "left out" lines (the
+    report's ``summary_text`` and ``summary.json`` have them). ``on_written(name, paths)`` is
+    called as each figure's files are saved."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    report = FigureReport()
+    report.summary = summarize(run)
+    if on_summary is not None:
+        on_summary(format_summary(report.summary))
 
-
-def write_figures(run: RunData, out_dir: str | Path) -> FigureReport:
-    """Write every figure ``run`` supports and ``summary.json`` into ``out_dir``."""
     from analysis.plots.quasi_bands import plot_quasi_bands
     from analysis.plots.regime_plot import plot_regime
     from analysis.plots.spatial_plot import plot_spatial_frequency
     from analysis.plots.spatiotemporal_plot import plot_spatiotemporal
     from analysis.plots.spectra_plot import plot_spectra
     from analysis.plots.stft_plot import plot_stft
-    from analysis.plots.style import amplitude_label
+    from analysis.plots.style import amplitude_label, save_figure
     from analysis.plots.sweep_plot import plot_amplitude_sweep
 
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    report = FigureReport()
+    def _save(fig: Figure, name: str) -> None:
+        report.figures[name] = save_figure(fig, out, name)
+        if on_written is not None:
+            on_written(name, report.figures[name])
+
     chain = run.chain
     n = len(chain.lengths_m)
     onset, cutoff = band_edges(chain)
 
     inputs = [(d, s.f_center_Hz) for d, s in run.scans.items()]
-    _save(report, plot_quasi_bands(chain, inputs), out, "quasi_bands")
+    _save(plot_quasi_bands(chain, inputs), "quasi_bands")
 
     sweeps: dict[str, AmplitudeSweep] = {}
     sweep_why: dict[str, str] = {}
@@ -118,7 +139,7 @@ def write_figures(run: RunData, out_dir: str | Path) -> FigureReport:
         hi, lo = amps[-1], amps[0]
         amp_label = amplitude_label(float(scan.amplitudes[hi]), scan.amplitude_units)
 
-        _save(report, plot_spectra(scan, chain, hi, f_range), out, f"spectra_{direction}")
+        _save(plot_spectra(scan, chain, hi, f_range), f"spectra_{direction}")
 
         smap = spatial_frequency_map(scan.velocity[hi], scan.cylinders, rate, f_range)
         drive_rows = [
@@ -137,7 +158,7 @@ def write_figures(run: RunData, out_dir: str | Path) -> FigureReport:
             drive,
             title=f"{direction.upper()} spatial-frequency map, amplitude {amp_label}",
         )
-        _save(report, fig, out, f"spatial_frequency_{direction}")
+        _save(fig, f"spatial_frequency_{direction}")
 
         panels: list[tuple[int, Stft]] = []
         edges: list[tuple[float, float]] = []
@@ -156,7 +177,7 @@ def write_figures(run: RunData, out_dir: str | Path) -> FigureReport:
             fig = plot_stft(
                 panels, f_range, f"{direction.upper()} STFT, amplitude {amp_label}", edges
             )
-            _save(report, fig, out, f"stft_{direction}")
+            _save(fig, f"stft_{direction}")
 
         st_panels: list[tuple[str, SpatiotemporalMap]] = []
         for a in dict.fromkeys([lo, hi]):
@@ -168,12 +189,12 @@ def write_figures(run: RunData, out_dir: str | Path) -> FigureReport:
             )
         limit = linear_limit_cylinder(scan.f_center_Hz, direction, onset, cutoff)
         fig = plot_spatiotemporal(st_panels, limit, n_cylinders=len(onset))
-        _save(report, fig, out, f"spatiotemporal_{direction}")
+        _save(fig, f"spatiotemporal_{direction}")
 
     if sweeps:
-        _save(report, plot_amplitude_sweep(sweeps), out, "amplitude_sweep")
+        _save(plot_amplitude_sweep(sweeps), "amplitude_sweep")
         if any(np.isfinite(sw.transmission).any() for sw in sweeps.values()):
-            _save(report, plot_regime(sweeps), out, "regime")
+            _save(plot_regime(sweeps), "regime")
         else:  # its log axes had nothing to draw ("Data cannot be log-scaled")
             report.skipped["regime"] = (
                 "no far/near ratio: the entry cylinder was not measured at any amplitude"
@@ -186,7 +207,6 @@ def write_figures(run: RunData, out_dir: str | Path) -> FigureReport:
         report.skipped["amplitude_sweep"] = why_all
         report.skipped["regime"] = why_all
 
-    report.summary = summarize(run)
     report.summary["figures_left_out"] = dict(report.skipped)
     report.summary_text = format_summary(report.summary)
     report.summary_path = write_summary(report.summary, out / "summary.json")

@@ -7,7 +7,11 @@ correlations and the residual before and after, and writes the fitted chain file
 in its header and in ``<out>.json``). When the run also holds nonlinear points, it then
 predicts them with the DEM from the start values and from the fit (``biafc compare``'s figure
 of merit on every point, before and after): the test of the model from its linear fit alone.
-``--figures DIR`` writes the before/after spectra and the comparison figures after the fit.
+``--figures DIR`` writes the before/after spectra (``calibration``) and, unless ``--no-check``,
+the comparison figures of the fitted model in ``DIR/compare_after`` (``biafc compare``'s).
+
+What the fit is doing goes to stderr as it goes (the parameters, points and residuals; each
+stage; every second the evaluations so far and the relative residual); ``-q`` silences it.
 """
 
 from __future__ import annotations
@@ -15,6 +19,8 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
+from collections.abc import Callable
 from pathlib import Path
 
 from daq.cli.biafc import CliError
@@ -45,6 +51,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="skip predicting the nonlinear points with the DEM before and after the fit",
     )
+    parser.add_argument(
+        "-q", "--quiet", action="store_true", help="no progress lines (on stderr) during the fit"
+    )
+
+
+def _progress(quiet: bool) -> Callable[[str], None] | None:
+    """Where the fit's progress goes: a line to stderr at once, or nowhere with ``-q``."""
+    if quiet:
+        return None
+
+    def say(line: str) -> None:
+        print(line, file=sys.stderr, flush=True)
+
+    return say
 
 
 def run(args: argparse.Namespace) -> int:
@@ -64,11 +84,12 @@ def run(args: argparse.Namespace) -> int:
     can_write(out, "--out")
     if args.figures is not None:
         can_write_folder(args.figures, "--figures")
+    say = _progress(args.quiet)
     try:
-        result = calibrate(data, names, chain_spec=spec, nonlinear=args.nonlinear)
+        result = calibrate(data, names, chain_spec=spec, nonlinear=args.nonlinear, progress=say)
     except CalibrationError as exc:
         raise CliError(str(exc)) from None
-    print(result.table())
+    print(result.table(), flush=True)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(result.chain_yaml(path.name), encoding="utf-8")
     summary = result.as_dict()
@@ -76,7 +97,7 @@ def run(args: argparse.Namespace) -> int:
     if result.stroke_m_per_V is not None and "stroke" in result.names:
         stroke_arg = f" --piezo-stroke '{result.stroke_m_per_V * 1e6:.6g} um/V'"
     if not args.no_check:
-        summary["prediction"] = _check(data, spec, result, args.figures)
+        summary["prediction"] = _check(data, spec, result, args.figures, say)
     if args.figures is not None:
         _figures(data, spec, result, args.figures)
     json_path = out.with_suffix(".json")
@@ -106,14 +127,18 @@ def _free(out: Path) -> Path:
     return out.with_name(f"{out.stem}_new{suffix}")
 
 
-def _check(data, spec, result, figures: Path | None) -> dict[str, float | None]:  # type: ignore[no-untyped-def]
-    """Figure of merit of the DEM prediction of every point, from the start and from the fit."""
-    from analysis.compare_report import compare_run
+def _check(data, spec, result, figures: Path | None, say=None) -> dict[str, float | None]:  # type: ignore[no-untyped-def]
+    """Figure of merit of the DEM prediction of every point, from the start and from the fit;
+    with ``figures``, then ``biafc compare``'s figures of the fit in ``figures/compare_after``
+    (each said as written: they had been written and never mentioned)."""
+    from analysis.compare_report import compare_run, write_compare
 
+    if say is not None:
+        say("predicting every point with the DEM, from the start values and from the fit")
     before = compare_run(data, None, chain_spec=spec).comparison
     after_report = compare_run(
         data,
-        None if figures is None else figures / "compare_after",
+        None,
         chain_spec=result.spec,
         piezo_stroke_m_per_V=result.stroke_m_per_V if "stroke" in result.names else None,
     )
@@ -134,8 +159,17 @@ def _check(data, spec, result, figures: Path | None) -> dict[str, float | None]:
         f"values, {after.figure_of_merit:.3f} from the fit{alone} (time-domain "
         f"{before.time_figure:.3f} -> "
         f"{after.time_figure:.3f}, noise floor "
-        + (f"{after.noise_figure:.3f})" if math.isfinite(after.noise_figure) else "n/a)")
+        + (f"{after.noise_figure:.3f})" if math.isfinite(after.noise_figure) else "n/a)"),
+        flush=True,
     )
+    if figures is not None:
+
+        def written(name: str, paths: list[Path]) -> None:
+            print(f"written {name}: {', '.join(str(p) for p in paths)}", flush=True)
+
+        write_compare(after_report, data, figures / "compare_after", written)
+        print(f"written {after_report.csv_path}")
+        print(f"written {after_report.json_path}")
     return {
         "figure_of_merit_before": f(before.figure_of_merit),
         "figure_of_merit_after": f(after.figure_of_merit),

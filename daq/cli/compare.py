@@ -56,6 +56,15 @@ def run(args: argparse.Namespace) -> int:
     stroke = parse_stroke(args.piezo_stroke) if args.piezo_stroke else None
     out = args.out or path.with_name(f"{path.stem}_compare")
     can_write_folder(out, "--out")  # before the model runs, not after
+
+    # the table first, then each figure as it is saved: the figures take 5.5 of 7.5 s on a
+    # biafc_sweep run, and everything had been printed at once at its end
+    def text(table: str) -> None:
+        print(table, flush=True)
+
+    def written(name: str, paths: list[Path]) -> None:
+        print(f"written {name}: {', '.join(str(p) for p in paths)}", flush=True)
+
     try:
         report = compare_run(
             data,
@@ -63,12 +72,11 @@ def run(args: argparse.Namespace) -> int:
             chain_spec=spec,
             piezo_stroke_m_per_V=stroke,
             solver="linear" if args.linear else "dem",
+            on_text=text,
+            on_written=written,
         )
     except ValueError as exc:
         raise CliError(f"{path}: {exc}") from exc
-    print(report.text())
-    for name, paths in report.files.items():
-        print(f"written {name}: {', '.join(str(p) for p in paths)}")
     for name, why in report.not_drawn.items():
         print(f"not drawn {name}: {why}")
     print(f"written {report.csv_path}")

@@ -185,14 +185,22 @@ def run(args: argparse.Namespace) -> int:
 
     out = args.out or path.with_name(f"{path.stem}_figures")
     can_write_folder(out, "--out")
+
+    # the summary first, then each figure as it is saved: drawing takes 5 of 5.4 s on a
+    # biafc_sweep run, and everything had been printed at once at its end
+    def summary(text: str) -> None:
+        print(text, flush=True)
+
+    def written(name: str, paths: list[Path]) -> None:
+        print(f"written {name}: {', '.join(str(p) for p in paths)}", flush=True)
+
     try:
-        report = write_figures(data, out)
+        report = write_figures(data, out, on_summary=summary, on_written=written)
     except ValueError as exc:
         raise CliError(f"{path}: {exc}") from exc
-    print(report.summary_text)
-    for name, paths in report.figures.items():  # what was left out: in the summary above
-        print(f"written {name}: {', '.join(str(p) for p in paths)}")
     print(f"written {report.summary_path}")
+    for name, why in report.skipped.items():  # known once drawn: after the figures
+        print(f"left out {name}: {why}")
     return 0
 
 

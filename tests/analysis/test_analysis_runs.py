@@ -8,6 +8,7 @@ from pathlib import Path
 import analysis_synthetic as synthetic
 import numpy as np
 import pytest
+from printed_lines import PrintedLines
 
 from analysis.bands import band_edges
 from analysis.report import measured_amplitudes, stft_cylinders, write_figures
@@ -292,3 +293,32 @@ def test_a_far_cylinder_outside_the_scan_is_named_not_called_unmeasured(tmp_path
     assert run_protocol(["smoke.yaml", "--out", str(out), "-q"]) == 0
     rows = summarize(read_run(out))["rows"]
     assert [r["conversion"] for r in rows] == ["not scanned: far cylinder 31"] * 2
+
+
+def test_figures_print_the_summary_first_and_each_figure_as_it_is_saved(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Everything was printed at the end: 5.1 s of silence on a biafc_sweep run, then the
+    summary and every "written" line at once. Now the summary comes before any figure is drawn
+    (0.8 s), each "written" line once its files are saved, the "left out" lines at the end."""
+    run = synthetic.write_run(tmp_path / "one.h5", directions=("ltr",), amplitudes=(4e-6,))
+    out = tmp_path / "f"
+    rec = PrintedLines(out)
+    monkeypatch.setattr("sys.stdout", rec)
+    assert biafc_main(["figures", str(run), "--out", str(out)]) == 0
+    lines = [line for line, _ in rec.lines]
+    seen = dict(rec.lines)
+    assert lines[0].startswith(f"{run}  status=")
+    assert seen[lines[0]] == set()  # the summary: before any figure
+    written = [line for line in lines if line.startswith("written ") and ".png" in line]
+    assert [w.split(":")[0] for w in written] == [
+        "written quasi_bands", "written spectra_ltr", "written spatial_frequency_ltr",
+        "written stft_ltr", "written spatiotemporal_ltr",
+    ]  # fmt: skip
+    for i, line in enumerate(written):  # each once its own file is there, before the next's
+        name = line.split(":")[0].removeprefix("written ")
+        assert name in seen[line] and len(seen[line]) == i + 1
+    left = [i for i, line in enumerate(lines) if line.startswith("left out ")]
+    assert [lines[i].split(":")[0] for i in left] == ["left out amplitude_sweep", "left out regime"]
+    assert min(left) > lines.index(f"written {out / 'summary.json'}")
+    assert "f_out: far-end output peak" in "\n".join(lines[: lines.index(written[0])])
