@@ -81,7 +81,8 @@ class MainWindow(QMainWindow):
         ``assembler(bench_file, seed) -> BenchInstruments`` (tests pass fakes).
     """
 
-    #: emitted with the run's status ("complete" | "aborted" | "failed") when a run ends
+    #: emitted with the run's status when a run ends: "complete" | "aborted" | "failed" (also
+    #: finished with failed points: the run panel's line tells them apart) | "unsafe" | "refused"
     run_finished = Signal(str)
     #: emitted when a bench connection attempt ends (True: connected)
     connected = Signal(bool)
