@@ -236,3 +236,31 @@ def test_every_command_that_runs_the_dem_says_when_it_compiles(
     with pytest.raises(SystemExit):
         main([command, "--help"])
     assert installed == [True]
+
+
+def test_a_stale_index_is_no_compiled_kernel(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A fresh clone's first run estimated 00:00 and then compiled for 11.4 s: an index left in
+    its cache folder by other sources (numba keys it by the source's sha256) counted as a
+    compiled kernel."""
+    import hashlib
+    import pickle
+    from importlib.metadata import version
+
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    source = Path(kernel_cache.__file__).with_name("kernel.py").read_bytes()
+    stamp = hashlib.sha256(source).digest()
+
+    def index(numba_version: str, digest: bytes) -> None:
+        with (tmp_path / "kernel.run_chunks-404.py311.nbi").open("wb") as f:
+            pickle.dump(numba_version, f)
+            f.write(pickle.dumps((digest, {})))
+
+    assert not kernel_cache.kernel_cached_on_disk()  # nothing there
+    index(version("numba"), hashlib.sha256(source + b"# older").digest())
+    assert not kernel_cache.kernel_cached_on_disk()  # other sources
+    index("0.1.0", stamp)
+    assert not kernel_cache.kernel_cached_on_disk()  # another numba
+    index(version("numba"), stamp)
+    assert kernel_cache.kernel_cached_on_disk()
