@@ -15,6 +15,7 @@ import pytest
 
 from daq.cli.compile_notice import CompileNotice
 from sim_backend.dem import kernel_cache
+from tests.kernel_index import write_fresh_index
 
 ROOT = Path(__file__).resolve().parents[2]
 PROBE = "from sim_backend.dem import kernel; print(kernel.run_chunks._cache._cache_path)"
@@ -215,8 +216,7 @@ def test_where_the_kernel_is_looked_for_follows_numbas_fallback(
     assert kernel_cache.expected_cache_folder() == tmp_path / "new" / "cache" / "numba"
     # and a kernel numba keeps there counts as on disk (every run announced a compile)
     there = tmp_path / "there"
-    (there / "sim_backend" / "dem").mkdir(parents=True)
-    (there / "sim_backend" / "dem" / "kernel.run_chunks-405.py311.nbi").write_bytes(b"")
+    write_fresh_index(there / "sim_backend" / "dem" / "kernel.run_chunks-405.py311.nbi")
     monkeypatch.setattr(kernel_cache, "expected_cache_folder", lambda: there)
     assert kernel_cache.kernel_cached_on_disk()  # looked for where numba keeps it
 
@@ -244,23 +244,15 @@ def test_a_stale_index_is_no_compiled_kernel(
     """A fresh clone's first run estimated 00:00 and then compiled for 11.4 s: an index left in
     its cache folder by other sources (numba keys it by the source's sha256) counted as a
     compiled kernel."""
-    import hashlib
-    import pickle
-    from importlib.metadata import version
-
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    index = tmp_path / "kernel.run_chunks-404.py311.nbi"
     source = Path(kernel_cache.__file__).with_name("kernel.py").read_bytes()
-    stamp = hashlib.sha256(source).digest()
-
-    def index(numba_version: str, digest: bytes) -> None:
-        with (tmp_path / "kernel.run_chunks-404.py311.nbi").open("wb") as f:
-            pickle.dump(numba_version, f)
-            f.write(pickle.dumps((digest, {})))
-
     assert not kernel_cache.kernel_cached_on_disk()  # nothing there
-    index(version("numba"), hashlib.sha256(source + b"# older").digest())
+    write_fresh_index(index, sources=source + b"# older")
     assert not kernel_cache.kernel_cached_on_disk()  # other sources
-    index("0.1.0", stamp)
+    write_fresh_index(index, numba="0.1.0")
     assert not kernel_cache.kernel_cached_on_disk()  # another numba
-    index(version("numba"), stamp)
+    index.write_bytes(b"")
+    assert not kernel_cache.kernel_cached_on_disk()  # truncated
+    write_fresh_index(index)
     assert kernel_cache.kernel_cached_on_disk()

@@ -15,6 +15,7 @@ from daq.engine import EventKind, RunEngine, RunEvent, make_plan
 from daq.engine.eta import EtaEstimator, PointCosts, arms_burst
 from protocols.bench import load_bench
 from protocols.schema import load_protocol
+from tests.kernel_index import write_fresh_index
 
 from .fakes import FakeWorld, Faults, fake_bench
 
@@ -159,8 +160,7 @@ def test_model_compiled_looks_where_the_kernel_is_cached(tmp_path, monkeypatch) 
     monkeypatch.delitem(sys.modules, "sim_backend.dem.kernel", raising=False)
     assert not eta_mod.model_compiled()
     index = tmp_path / "numba" / "sim_backend" / "dem" / "kernel.run_chunks-42.py311.nbi"
-    index.parent.mkdir(parents=True)
-    index.write_bytes(b"")
+    write_fresh_index(index)
     assert eta_mod.model_compiled()
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "elsewhere"))
     assert not eta_mod.model_compiled()
