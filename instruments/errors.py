@@ -12,6 +12,7 @@ __all__ = [
     "InstrumentError",
     "InstrumentTimeout",
     "LimitError",
+    "MoveTimeout",
     "NotHomedError",
     "ReplyError",
     "SignalLostError",
@@ -41,6 +42,11 @@ class NotHomedError(InstrumentError):
 
 class StallError(InstrumentError):
     """A stage stalled or hit a limit while moving."""
+
+
+class MoveTimeout(InstrumentError):
+    """A stage answered every poll but its move or homing did not end in time: a blocked or
+    too slow axis, not a dead link (not an :class:`InstrumentTimeout`)."""
 
 
 class SignalLostError(InstrumentError):

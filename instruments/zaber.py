@@ -36,6 +36,7 @@ from instruments.errors import (
     InstrumentError,
     InstrumentTimeout,
     LimitError,
+    MoveTimeout,
     NotHomedError,
     ReplyError,
     StallError,
@@ -291,6 +292,8 @@ class ZaberStage:
         self._stop_unanswered = False  # it answers again
         if r.device != s.device:
             raise ReplyError(f"{self.transport.name}: reply to {cmd!r} from device {r.device}")
+        if r.axis not in (s.axis, 0):
+            raise ReplyError(f"{self.transport.name}: reply to {cmd!r} from axis {r.axis}")
         rejected = "" if r.ok else f"; rejected ({r.data or 'no reason given'})"
         if check_flags and _is_fault(r.flag):
             raise StallError(
@@ -452,6 +455,12 @@ class ZaberStage:
         self.command("home")
         if not self._wait_idle("home", timeout, cancel):
             return
+        left = self.warnings()
+        if "WR" in left:  # the homing ended without finding the reference (interrupted)
+            raise NotHomedError(
+                f"{self.transport.name}: homing ended without a reference (flags "
+                f"{' '.join(left)}); home it again"
+            )
         self._must_home = False
 
     def home_time_s(self) -> float | None:
@@ -620,8 +629,9 @@ class ZaberStage:
         if idle is None:
             return False
         stopped = "stopped" if self._wait_rest() else "stop sent, still moving"
-        raise InstrumentTimeout(
-            f"{self.transport.name}: {what} not finished within {timeout_s:.3g} s; " + stopped
+        raise MoveTimeout(  # it answered every poll: blocked or slow, not a dead link
+            f"{self.transport.name}: {what} not finished within {timeout_s:.3g} s though the "
+            f"controller answered (axis blocked or too slow?); " + stopped
         )
 
     def stop(self) -> None:
@@ -644,9 +654,14 @@ class ZaberStage:
         return bool(self._poll_idle(self.settings.stop_timeout_s, check_flags=False))
 
     def clear_warnings(self) -> list[str]:
-        """``warnings clear`` (after a handled stall/limit fault); the flags it cleared."""
+        """``warnings clear`` (after a handled stall/limit fault); the flags it cleared. A
+        cleared stall or limit fault (FS, WL) leaves the axis to be homed again, as at
+        connect: its position may have slipped."""
         r = self.command("warnings clear", check_flags=False)
-        return r.data.split()[1:]
+        cleared = r.data.split()[1:]
+        if {"FS", "WL"} & set(cleared):
+            self._must_home = True
+        return cleared
 
     def snapshot(self) -> dict[str, Any]:
         s = self.settings

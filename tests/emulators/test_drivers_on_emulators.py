@@ -8,6 +8,7 @@ import pytest
 from instruments.burst import Burst, burst_samples
 from instruments.errors import (
     InstrumentTimeout,
+    MoveTimeout,
     NotHomedError,
     ReplyError,
     SignalLostError,
@@ -150,6 +151,9 @@ def test_stage_faults(clock: SimClock) -> None:
     with pytest.raises(StallError, match="stalled"):
         stage.move_to(0.1)
     stage.clear_warnings()
+    with pytest.raises(NotHomedError):  # a stall may have slipped the position: home again
+        stage.move_to(0.1)
+    stage.home()
     stage.move_to(0.1)
     emu.lose_homing()
     with pytest.raises(NotHomedError):
@@ -328,9 +332,59 @@ def test_stage_move_timeout_stops_axis(clock: SimClock) -> None:
     stage, emu = make_stage(clock, timeout_margin_s=0.0)
     stage.home()
     emu.maxspeed = 1  # far slower than the driver believes
-    with pytest.raises(InstrumentTimeout, match=r"not finished.*; stopped$"):
+    # it answered every poll: a blocked or slow axis, not a dead link (a second reader: it was
+    # an InstrumentTimeout, which the run called "stage stopped answering")
+    with pytest.raises(MoveTimeout, match=r"not finished.*controller answered.*; stopped$"):
         stage.move_to(0.1)
     assert not emu.busy()  # "stopped" is said once the axis is at rest
+
+
+def test_an_interrupted_homing_is_not_taken_for_a_homed_stage(clock: SimClock) -> None:
+    """A second reader: a homing cut short (WR, no reference, still set) returned as if it had
+    homed; the run then failed at its first point with "stage not homed"."""
+    stage, emu = make_stage(clock)
+    real = emu.handle
+
+    def cut_short(message: bytes) -> str | None:
+        if b"get pos" in message and emu.busy():
+            emu._halt()  # stopped where it is: no reference found, WR stays
+        return real(message)
+
+    emu.handle = cut_short  # type: ignore[method-assign]
+    with pytest.raises(NotHomedError, match="homing ended without a reference"):
+        stage.home()
+    emu.handle = real  # type: ignore[method-assign]
+    assert not stage.is_homed()
+
+
+def test_a_reply_from_another_axis_is_refused(clock: SimClock) -> None:
+    """A second reader: the reply's axis number was never checked."""
+    stage, emu = make_stage(clock)
+    stage.home()
+    real = emu.handle
+
+    def other_axis(message: bytes) -> str | None:
+        reply = real(message)
+        return reply.replace("@01 1 ", "@01 2 ", 1) if reply is not None else None
+
+    emu.handle = other_axis  # type: ignore[method-assign]
+    with pytest.raises(ReplyError, match="from axis 2"):
+        stage.position()
+
+
+def test_clearing_a_stall_leaves_the_stage_to_be_homed(clock: SimClock) -> None:
+    """A second reader: clear_warnings() dropped a stall (FS) and the stage counted as homed,
+    though its position may have slipped; connect() already asked for a new homing."""
+    stage, emu = make_stage(clock)
+    stage.home()
+    assert stage.is_homed()
+    emu.stall()
+    with pytest.raises(StallError):
+        stage.move_to(0.1)
+    assert "FS" in stage.clear_warnings()
+    assert not stage.is_homed()
+    stage.home()
+    assert stage.is_homed()
 
 
 EIGHT_POINTS = bytes(16)  # 8 DAC codes of 0, the emulator's minimum

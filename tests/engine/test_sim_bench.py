@@ -216,3 +216,18 @@ def test_a_generator_error_during_the_last_point_is_not_complete(tmp_path: Path)
     assert res.status == "failed", res.reason
     assert "-222" in res.reason
     assert read_run(eng.out_path).status == "failed"
+
+
+def test_a_stage_too_slow_for_its_move_is_not_called_a_dead_link(tmp_path: Path) -> None:
+    """A second reader: a move that outlasted its bound while the controller answered every
+    poll ended the run "DeadInstrumentError: stage stopped answering", sending the person to
+    the cable when the axis was blocked or slow."""
+    eng, inst = _engine(tmp_path, {})
+    emu = inst.world._inst.stage  # type: ignore[attr-defined]
+    real_go = emu._go
+    emu._go = lambda target, maxspeed=None: real_go(target, 100)  # a blocked, slow axis
+    res = eng.run()
+    assert res.status == "failed", res.reason
+    assert "MoveTimeout" in res.reason and "controller answered" in res.reason
+    assert "stopped answering" not in res.reason
+    assert _generator_outputs_off(inst)
