@@ -254,3 +254,17 @@ def test_hardware_acquisition() -> None:
     )
     assert rate > 0
     dig.safe_state()
+
+
+def test_a_task_left_holding_the_card_blocks_the_next_until_the_safe_state(card: Card) -> None:
+    """A second reader: the stand-in reserved nothing, so two digitisers on Dev1 both ran; on a
+    real card a task left committed (a leak) makes the next one's commit fail with -50103.
+    The driver says so in one line, and its safe state frees the card."""
+    first = digitiser(card)
+    first.configure(config())  # committed, never closed
+    second = digitiser(card)
+    with pytest.raises(InstrumentError) as info:
+        second.configure(config())
+    assert "-50103" in str(info.value) and "\n" not in str(info.value)
+    first.safe_state()  # closes its task: the card is free
+    assert second.configure(config()) == pytest.approx(100e3)

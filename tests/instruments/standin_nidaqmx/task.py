@@ -127,6 +127,22 @@ class Task:
             raise DaqError("Pretrigger samples out of range.", -200077, self._name)
         self._state = State.VERIFIED
 
+    def _reserve(self) -> None:
+        """A device's analog inputs serve one task at a time: reserving, committing or starting
+        a task while another on the same device holds them (reserved, committed or running)
+        fails with -50103, as DAQmx does (creating the task never does)."""
+        mine = {c.device.lower() for c in self._chans}
+        for other in self._card.tasks:
+            if other is self or other._handle is None or other._state < State.RESERVED:
+                continue
+            if mine & {c.device.lower() for c in other._chans}:
+                raise DaqError(
+                    "The specified resource is reserved. The operation could not be completed "
+                    f"as specified.\nTask Name: {self._name}",
+                    -50103,
+                    self._name,
+                )
+
     def control(self, action: TaskMode) -> None:
         self._valid()
         if action is TaskMode.TASK_START:
@@ -147,12 +163,16 @@ class Task:
                 TaskMode.TASK_RESERVE: State.RESERVED,
                 TaskMode.TASK_COMMIT: State.COMMITTED,
             }[action]
+            if target >= State.RESERVED and self._state < State.RESERVED:
+                self._reserve()
             self._state = self._base = max(self._state, target)
 
     def start(self) -> None:
         self._valid()
         self._not_running()
         self._verify()
+        if self._state < State.RESERVED:
+            self._reserve()
         self._base = max(self._state, State.VERIFIED)
         self._state = State.RUNNING
         self._t_start = self._card.now()
