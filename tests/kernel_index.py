@@ -10,15 +10,20 @@ from importlib.metadata import version
 from pathlib import Path
 
 
-def write_fresh_index(path: Path, sources: bytes | None = None, numba: str | None = None) -> None:
+def write_fresh_index(
+    path: Path, sources: bytes | None = None, numba: str | None = None, cpu: str | None = None
+) -> None:
     """Write ``path`` (``kernel.run_chunks-*.nbi``): numba's version string, then the pickled
-    ``(sha256 of the sources, overloads)``; ``sources``/``numba`` default to this kernel's."""
+    ``(sha256 of the sources, overloads)``, its one overload keyed with the CPU it was compiled
+    for; ``sources``, ``numba`` and ``cpu`` default to this kernel's, numba's and this host's."""
     from sim_backend.dem import kernel_cache
 
     src = sources if sources is not None else Path(kernel_cache.__file__).with_name(
         "kernel.py"
     ).read_bytes()  # fmt: skip
+    host = kernel_cache._cpu_name() or b"generic"
+    key = ("signature", ("x86_64-unknown-linux-gnu", cpu.encode() if cpu else host, b""))
     path.parent.mkdir(parents=True, exist_ok=True)
     with path.open("wb") as f:
         pickle.dump(numba if numba is not None else version("numba"), f)
-        f.write(pickle.dumps((hashlib.sha256(src).digest(), {})))
+        f.write(pickle.dumps((hashlib.sha256(src).digest(), {key: "kernel.run_chunks-1.nbc"})))

@@ -180,26 +180,45 @@ def kernel_cached_on_disk() -> bool:
     try:
         stamp = hashlib.sha256(Path(__file__).with_name("kernel.py").read_bytes()).digest()
         numba_version = version("numba")
+        cpu = _cpu_name()
         return any(
-            _fresh_index(nbi, stamp, numba_version)
+            _fresh_index(nbi, stamp, numba_version, cpu)
             for nbi in folder.rglob("kernel.run_chunks-*.nbi")
         )
     except (OSError, PackageNotFoundError):
         return False
 
 
-def _fresh_index(nbi: Path, stamp: bytes, numba_version: str) -> bool:
+def _cpu_name() -> bytes | None:
+    """The CPU numba compiles for (``$NUMBA_CPU_NAME``, else LLVM's host CPU, e.g. ``znver5``):
+    numba keys a cached kernel by it too, so one compiled on another machine is compiled again
+    (a session's machine changed from Zen 3 to Zen 5: its first run estimated 00:00, then
+    compiled). None where llvmlite cannot say."""
+    name = os.environ.get("NUMBA_CPU_NAME")
+    if not name:
+        try:
+            from llvmlite import binding
+
+            name = str(binding.get_host_cpu_name())
+        except Exception:
+            return None
+    return name.encode()
+
+
+def _fresh_index(nbi: Path, stamp: bytes, numba_version: str, cpu: bytes | None = None) -> bool:
     """Whether numba's index ``nbi`` (a pickled version string, then the pickled ``(source
-    stamp, overloads)``) was written by ``numba_version`` for the sources of sha256 ``stamp``."""
+    stamp, overloads)``, each overload keyed with the CPU it was compiled for) was written by
+    ``numba_version`` for the sources of sha256 ``stamp`` and holds a kernel for ``cpu``."""
     import pickle
 
     try:
         with nbi.open("rb") as f:
             if pickle.load(f) != numba_version:
                 return False
-            return stamp in f.read()
+            data = f.read()
     except Exception:  # unreadable, truncated: numba would recompile too
         return False
+    return stamp in data and (cpu is None or cpu in data)
 
 
 def kernel_loaded() -> bool:

@@ -252,6 +252,8 @@ def test_a_stale_index_is_no_compiled_kernel(
     assert not kernel_cache.kernel_cached_on_disk()  # other sources
     write_fresh_index(index, numba="0.1.0")
     assert not kernel_cache.kernel_cached_on_disk()  # another numba
+    write_fresh_index(index, cpu="some-other-cpu")
+    assert not kernel_cache.kernel_cached_on_disk()  # compiled on another machine
     index.write_bytes(b"")
     assert not kernel_cache.kernel_cached_on_disk()  # truncated
     write_fresh_index(index)
