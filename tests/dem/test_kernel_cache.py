@@ -216,9 +216,17 @@ def test_where_the_kernel_is_looked_for_follows_numbas_fallback(
     assert kernel_cache.expected_cache_folder() == tmp_path / "new" / "cache" / "numba"
     # and a kernel numba keeps there counts as on disk (every run announced a compile)
     there = tmp_path / "there"
-    write_fresh_index(there / "sim_backend" / "dem" / "kernel.run_chunks-405.py311.nbi")
     monkeypatch.setattr(kernel_cache, "expected_cache_folder", lambda: there)
+    write_fresh_index(kernel_cache.kernel_index_folder() / "kernel.run_chunks-405.py311.nbi")
+    assert kernel_cache.kernel_index_folder().parent == there
     assert kernel_cache.kernel_cached_on_disk()  # looked for where numba keeps it
+    # another installation's subfolder of the same cache folder is not this one's (a fresh
+    # clone counted another clone's index as its own: "estimated 00:00", then 9.8 s of compile)
+    other = there / "dem_0123456789abcdef0123456789abcdef01234567"
+    other.mkdir()
+    index = kernel_cache.kernel_index_folder() / "kernel.run_chunks-405.py311.nbi"
+    index.rename(other / index.name)
+    assert not kernel_cache.kernel_cached_on_disk()
 
 
 @pytest.mark.parametrize("command", ["regime", "compare", "calibrate", "figures", "check"])
@@ -245,7 +253,7 @@ def test_a_stale_index_is_no_compiled_kernel(
     its cache folder by other sources (numba keys it by the source's sha256) counted as a
     compiled kernel."""
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
-    index = tmp_path / "kernel.run_chunks-404.py311.nbi"
+    index = kernel_cache.kernel_index_folder() / "kernel.run_chunks-404.py311.nbi"
     source = Path(kernel_cache.__file__).with_name("kernel.py").read_bytes()
     assert not kernel_cache.kernel_cached_on_disk()  # nothing there
     write_fresh_index(index, sources=source + b"# older")

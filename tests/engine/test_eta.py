@@ -159,8 +159,9 @@ def test_model_compiled_looks_where_the_kernel_is_cached(tmp_path, monkeypatch) 
     # this process may have loaded the kernel already: only the disk counts here
     monkeypatch.delitem(sys.modules, "sim_backend.dem.kernel", raising=False)
     assert not eta_mod.model_compiled()
-    index = tmp_path / "numba" / "sim_backend" / "dem" / "kernel.run_chunks-42.py311.nbi"
-    write_fresh_index(index)
+    from sim_backend.dem.kernel_cache import kernel_index_folder
+
+    write_fresh_index(kernel_index_folder() / "kernel.run_chunks-42.py311.nbi")
     assert eta_mod.model_compiled()
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "elsewhere"))
     assert not eta_mod.model_compiled()
