@@ -3,6 +3,7 @@ Reconnect whose generator reports an output on, nor by a failed connect."""
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Any
 
@@ -46,17 +47,23 @@ def test_reconnect_keeps_unsafe_until_every_output_reads_back_off(
 
 
 def test_a_new_run_keeps_unsafe_until_its_end_confirms_the_safe_state(
-    qtbot: Any, tmp_path: Path
+    qtbot: Any, tmp_path: Path, screenshots: Path
 ) -> None:
     """Start took the last run's UNSAFE down before anything was read back: the panel said
     "connected" while the output the run could not switch off had not been confirmed off."""
 
-    # the generator goes silent mid-run
-    win = unsafe_window(qtbot, tmp_path / "u.h5", silent_generator(read_sleep_s=0.05))
+    # the generator goes silent mid-run (its file named as no machine in the docs' picture)
+    out = tmp_path / "u.h5" if not os.environ.get("BIAFC_SCREENSHOTS") else Path("runs/u.h5")
+    for old in (out, out.with_suffix(".log"), out.with_name(out.name + ".lock")):
+        old.unlink(missing_ok=True)
+    win = unsafe_window(qtbot, out, silent_generator(read_sleep_s=0.05))
     label = win.bench_panel.status_label
+    qtbot.wait(200)  # laid out for the mark's lines before the picture is taken
+    picture = win.grab()
     # what to switch off is named on the panel itself: the next run replaces the run's line
     assert label.text().startswith("✗ UNSAFE") and "u.h5" in label.text()
     assert "SWITCH OFF BY HAND" in label.text() and "output 1" in label.text()
+    assert picture.save(str(screenshots / "bench_window_unsafe.png"))  # docs/gui.md
 
     win.instruments.world.faults.clear()  # the generator answers again
     qtbot.waitUntil(lambda: win.run_panel.start_button.isEnabled(), timeout=10_000)
