@@ -200,14 +200,10 @@ def _protocol_differences(stored: ProtocolFile, given: ProtocolFile) -> list[str
     ]
 
 
-def _stored_chain_spec(snapshot_json: Any) -> dict[str, Any] | None:
-    """The simulated bench's chain as a run recorded it (``/snapshot``'s
-    ``simulation_model.chain_spec``), or None."""
-    try:
-        text = snapshot_json.decode() if isinstance(snapshot_json, bytes) else str(snapshot_json)
-        spec = json.loads(text).get("simulation_model", {}).get("chain_spec")
-    except (ValueError, AttributeError):
-        return None
+def _stored_chain_spec(model: dict[str, Any] | None) -> dict[str, Any] | None:
+    """The simulated bench's chain as a run recorded it (``chain_spec`` of its
+    :func:`_stored_model`), or None."""
+    spec = model.get("chain_spec") if model is not None else None
     return spec if isinstance(spec, dict) else None
 
 
@@ -284,8 +280,9 @@ def check_resume(
     diffs: list[str] = []
     if bench is not None:
         diffs = bench_differences(text["bench_yaml"], bench, str(path))
-        diffs += chain_differences(_stored_chain_spec(snapshot_json), bench, str(path))
-        diffs += model_differences(_stored_model(snapshot_json), bench, str(path))
+        model = _stored_model(snapshot_json)  # the snapshot's JSON, parsed once
+        diffs += chain_differences(_stored_chain_spec(model), bench, str(path))
+        diffs += model_differences(model, bench, str(path))
         if diffs and not accept_bench_change and all(d.startswith(_MODEL) for d in diffs):
             raise StoreError(  # the same bench: only this software's model changed
                 f"--resume: {path} was measured with another simulated-bench model "
