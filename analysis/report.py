@@ -92,7 +92,9 @@ def write_figures(
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     report = FigureReport()
-    report.summary = summarize(run)
+    # each direction's sweep once, for the summary and the figures (each computed its own)
+    all_sweeps = {d: amplitude_sweep(scan, run.chain) for d, scan in run.scans.items()}
+    report.summary = summarize(run, all_sweeps)
     if on_summary is not None:
         on_summary(format_summary(report.summary))
 
@@ -124,7 +126,7 @@ def write_figures(
         if not amps:
             report.skipped[f"*_{direction}"] = "no point measured"
             continue
-        sw = amplitude_sweep(scan, chain)
+        sw = all_sweeps[direction]
         # measured, with or without a peak to give (at the noise floor, or none inside the range)
         n_far = int(np.count_nonzero(sw.far_measured))
         if n_far >= MIN_SWEEP_AMPLITUDES:

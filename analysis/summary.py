@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -199,7 +200,7 @@ def summary_rows(sweep: AmplitudeSweep, scan: ScanData | None = None) -> list[di
     return rows
 
 
-def summarize(run: RunData) -> dict[str, Any]:
+def summarize(run: RunData, sweeps: Mapping[str, AmplitudeSweep] | None = None) -> dict[str, Any]:
     """Summary of a run: ``{"file", "status", "backend", "far_cylinder", "output_peak",
     "points", "noise_unknown", "noise_band_Hz", "rows": [...]}``; ``output_peak`` says per
     direction what ``output_Hz`` (f_out) is; ``noise_unknown``: the directions whose measured
@@ -209,6 +210,8 @@ def summarize(run: RunData) -> dict[str, Any]:
     set against their noise over the whole record.
 
     ``rows`` holds one dict per direction and amplitude (see :func:`summary_rows`).
+    ``sweeps``: each direction's :func:`analysis.sweep.amplitude_sweep` where the caller has it
+    already (computed here otherwise).
     """
     rows: list[dict[str, Any]] = []
     far: dict[str, int] = {}
@@ -218,7 +221,7 @@ def summarize(run: RunData) -> dict[str, Any]:
     noise_band: dict[str, list[float]] = {}
     whole_record: list[str] = []
     for direction, scan in run.scans.items():
-        sweep = amplitude_sweep(scan, run.chain)
+        sweep = sweeps[direction] if sweeps is not None else amplitude_sweep(scan, run.chain)
         noise_band[direction] = [float(f) for f in sweep.signal_band_Hz]
         if sweep.noise_over_whole_record:
             whole_record.append(direction)
