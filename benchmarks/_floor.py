@@ -60,7 +60,9 @@ def kernel_ops(
 
     - ``pass1``, after every drift (m per step and one per sample): per cylinder the kick length
       x force (1 other); per mode the pending kick (1 fma), the 2x2 drift (2 fma, 2 other) and
-      the mode's share of u (1 fma) and, with a dashpot, of u' (1 fma).
+      the mode's share of u (1 fma) and, with a dashpot and a block of other than 4 modes, of u'
+      (1 fma). With a dashpot and 4 modes (:func:`velocity_in_pass2`) pass 2 sums u' instead,
+      every kick: K fma per cylinder.
     - ``pass2``, every kick. A contact's force at a velocity, ``[fh (1 + chi d')]_+``, is one
       multiply-add and 2 other (the factor, the product, the max). The actuator (lane masks,
       drive force, the Hertz force with its overlap, the wall's work, the force at the start
@@ -81,7 +83,8 @@ def kernel_ops(
     N, K = n_cyl, n_block
     w = 1 if far_wall else 0
     drifts = n_kicks + 1.0 / n_sub
-    fma1 = (5 if dashpot else 4) * N * K * drifts
+    vel2 = velocity_in_pass2(dashpot, K)
+    fma1 = (5 if dashpot and not vel2 else 4) * N * K * drifts
     out = {"pass1": {"fma": fma1, "other": (2 * N * K + N) * drifts, "sqrt": 0.0}}
     other = 19 + 4 * (N - 1) + 6 * w
     fma = 1 + w
@@ -90,6 +93,8 @@ def kernel_ops(
     else:
         other += 3 * (N - 1) + N + (5 + 3 * (N - 1) + 2 * w) + N
         fma += (N - 1) + N + (1 + (N - 1) + w) + (N if heun_kicks else 0)
+        if vel2:
+            fma += N * K
     out["pass2"] = {"fma": float(fma * n_kicks), "other": float(other * n_kicks),
                     "sqrt": float((N + w) * n_kicks)}  # fmt: skip
     if dashpot and heun_kicks:
@@ -112,8 +117,9 @@ def flops_per_step(
 ) -> float:
     """Floating-point operations of one step of one trajectory that the result needs: the
     operations of :func:`kernel_ops` (a multiply-add counts 2, a sqrt, max, add, subtract or
-    multiply 1) less u and u' (with a dashpot) after a sample's last drift (2 N K flops per
-    sample each), which the kernel computes and does not use."""
+    multiply 1) less u and u' (with a dashpot, when pass 1 sums it) after a sample's last drift
+    (2 N K flops per sample each), which the kernel computes and does not use: the same count
+    wherever u' is summed."""
     ops = kernel_ops(n_cyl, n_block, n_kicks, n_sub, dashpot, n_recorded, heun_kicks, far_wall)
     total = sum(2.0 * c["fma"] + c["other"] + c["sqrt"] for c in ops.values())
     return total - unneeded_flops(n_cyl, n_block, n_sub, dashpot)
@@ -121,8 +127,15 @@ def flops_per_step(
 
 def unneeded_flops(n_cyl: int, n_block: int, n_sub: int, dashpot: bool) -> float:
     """Flops a step of pass 1 in :func:`kernel_ops` that the result does not need: u and, with a
-    dashpot, u' after a sample's last drift (2 N K flops a sample each)."""
-    return (4.0 if dashpot else 2.0) * n_cyl * n_block / n_sub
+    dashpot summed in pass 1, u' after a sample's last drift (2 N K flops a sample each)."""
+    in_pass1 = dashpot and not velocity_in_pass2(dashpot, n_block)
+    return (4.0 if in_pass1 else 2.0) * n_cyl * n_block / n_sub
+
+
+def velocity_in_pass2(dashpot: bool, n_block: int) -> bool:
+    """Whether ``run_chunks`` sums the primary velocities u' in pass 2, every kick, where the
+    contacts read them (a dashpot and blocks of 4 modes: its ``vel4``), not in pass 1."""
+    return dashpot and n_block == 4
 
 
 # --- measured rates -----------------------------------------------------------------------

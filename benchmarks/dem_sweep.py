@@ -27,9 +27,10 @@ trajectory); and two floors:
   operations by class (multiply-adds, other vector operations, square roots) at the rates this
   machine measures for each (four-lane vectors, every thread), per pass the larger of the
   square-root unit's and the arithmetic ports' time, summed;
-- ``floor_lanes_s``: the kernel's own time for 16 trajectories (8 LTR + 8 RTL: two chunks of 8
-  lanes, one per thread, far end recorded) times B / 16: the single-chunk kernel time scaled
-  to B, i.e. what batching, output and the blocks cost on top of the kernel.
+- ``floor_lanes_s``: the kernel's own time for 32 trajectories a thread (as many LTR as RTL:
+  two chunks of 16 lanes a thread, the sweep's chunk, far end recorded) times B over their
+  number: the chunks' kernel time scaled to B, i.e. what batching, output and the blocks cost
+  on top of the kernel.
 
 Time to 1e-6 and 1e-8 (:func:`accuracy_rows`): the sweep's hardest trajectory (LTR, 4 delta0),
 30 ms, on the benchmark chain (contact dashpot 0.005) and the default chain (dashpot off), the
@@ -291,7 +292,7 @@ def _batch() -> dict[str, Any]:
 
 # --- the streaming sweep on one thread against one thread's floor (issue 18) -----------------
 
-#: trajectories of the one-thread sweep (2 directions x 16 amplitudes: four chunks of 8 lanes)
+#: trajectories of the one-thread sweep (2 directions x 16 amplitudes: two chunks of 16 lanes)
 ONE_THREAD_BATCH = 32
 #: rounds of the one-thread comparison: each the peak, then the sweep
 ONE_THREAD_ROUNDS = 9
@@ -441,22 +442,24 @@ def scaling_point(batch: int, path: str) -> dict[str, Any]:
     drives = _drives(chain, amplitudes)
     far = [chain.n]
     dem.simulate(chain, drives[:2], duration_s=1e-4, sample_rate_Hz=RATE_HZ)  # warm-up
-    # lane floor: 8 LTR + 8 RTL drives = two chunks of 8 lanes, one per thread
-    pick = np.linspace(0, batch // 2 - 1, 8).astype(int)
-    sixteen = [drives[i] for i in pick] + [drives[batch // 2 + i] for i in pick]
+    # lanes floor: 16 LTR + 16 RTL drives a thread = two chunks of 16 lanes a thread
+    import numba
+
+    pick = np.linspace(0, batch // 2 - 1, 16 * numba.get_num_threads()).astype(int)
+    lane_set = [drives[i] for i in pick] + [drives[batch // 2 + i] for i in pick]
     chunk_s = math.inf
     for _ in range(5):
         t0 = time.perf_counter()
-        res16 = dem.simulate(chain, sixteen, duration_s=DURATION_S, sample_rate_Hz=RATE_HZ,
+        res_lanes = dem.simulate(chain, lane_set, duration_s=DURATION_S, sample_rate_Hz=RATE_HZ,
                              cylinders=far, record=("velocity",))  # fmt: skip
         chunk_s = min(chunk_s, time.perf_counter() - t0)
     peak = peak_flops(repeats=2)
     rates = instruction_rates(repeats=2)
-    n_sub = int(res16.meta["substeps_per_sample"])
+    n_sub = int(res_lanes.meta["substeps_per_sample"])
     recorded = 1 if path == "sweep" else chain.n
     counts = _kernel_counts(chain, n_sub)
     fps = flops_per_step(*counts, recorded)
-    steps = n_sub * (res16.time_s.size - 1)
+    steps = n_sub * (res_lanes.time_s.size - 1)
     # the same number of trajectories (TRAJECTORIES) at every batch size: B = 128 runs 16
     # times, 2048 once, so that every row is exposed to the shared host for as long
     total = TRAJECTORIES if path == "sweep" else SIMULATE_TRAJECTORIES
@@ -485,7 +488,7 @@ def scaling_point(batch: int, path: str) -> dict[str, Any]:
     floor_flops_s = fps * steps * batch / peak
     instr = instruction_floor(kernel_ops(*counts, recorded), rates, steps * batch)
     floor_instr_s = instr["total_s"]
-    floor_lanes_s = chunk_s * batch / len(sixteen)
+    floor_lanes_s = chunk_s * batch / len(lane_set)
     return {
         "path": path,
         "B": batch,

@@ -23,12 +23,18 @@ Trajectories are processed in chunks of ``W`` lanes (same orientation, ``W`` a m
 four lanes to a SIMD vector (:mod:`sim_backend.dem.simd`): every operation below acts on four
 trajectories at once, and the per-lane arithmetic is the same whatever the chunk, so a drive's
 result does not depend on the batch around it. One kick costs two passes (three with Heun
-kicks): one over the cylinders applies the previous kick to the momenta, drifts every mode and
-sums the primary displacement and velocity (``u``, ``u'``) in registers (``u`` from a shift per
-cylinder that holds the rest overlaps, so that an overlap is one subtraction); one along the
-contacts, carrying the neighbours' values in registers, gives the Hertz forces, the forces at the
-start velocities and, one contact behind, the stage velocities and the forces there (one loop
-without branches per case: undamped, midpoint, Heun; the chain's ends outside it).
+kicks): one over the cylinders (16, 8 or 4 lanes at a time: each coefficient read once for as
+many vectors) applies the previous kick to the momenta, drifts every mode and sums the primary
+displacement ``u`` in registers (from a shift per cylinder that holds the rest overlaps, so that
+an overlap is one subtraction); one along the contacts, carrying the neighbours' values in
+registers, gives the Hertz forces, the forces at the start velocities and, one contact behind,
+the stage velocities and the forces there (one loop without branches per case: undamped,
+midpoint, Heun; the chain's ends outside it). The primary velocity ``u'``, which only the
+dashpots read, is summed where they read it, in the second pass, for blocks of 4 modes (the
+default chain's; in the first pass otherwise): the first pass is bound by its multiply-adds,
+the second by its square roots. Lanes whose bursts differ only by their amplitude compute the
+burst's shape once a kick (:func:`_burst_leads`), and no drive is evaluated outside every
+lane's drive window.
 
 The chunks are independent: :func:`run_batch` hands them to ``numba.get_num_threads()`` threads
 that each call the compiled :func:`run_chunks` (serial, without the GIL) on the next chunk not
@@ -128,7 +134,24 @@ def drift_coefficients(
 def _burst(tau: float, prm: NDArray[np.float64], r: int) -> tuple[float, float]:
     """(value, d value/dt) of the analytic burst of drive ``r`` (:func:`drive_value`) at
     ``tau`` s after its start, by its formula whether or not ``0 < tau < T``."""
-    amp = prm[r, 0]
+    env, cs, slope = _burst_shape(tau, prm, r)
+    return _burst_scaled(prm[r, 0], env, cs, slope)
+
+
+@numba.njit(inline="always")
+def _burst_scaled(amp: float, env: float, cs: float, slope: float) -> tuple[float, float]:
+    """(value, d value/dt) of a burst of amplitude ``amp`` from its shape (:func:`_burst_shape`):
+    the kernel's lanes that share a shape take their drive by it too, so the bits are
+    :func:`drive_value`'s by construction."""
+    return amp * env * cs, amp * slope
+
+
+@numba.njit(inline="always")
+def _burst_shape(tau: float, prm: NDArray[np.float64], r: int) -> tuple[float, float, float]:
+    """What :func:`_burst` takes from drive ``r``'s shape, not from its amplitude: the envelope,
+    the carrier's cosine and the slope per unit amplitude, ``(env, cos, d(env cos)/dt)`` (1, 1,
+    1/s). A lane whose burst differs from another's by its amplitude alone reuses them
+    (``run_chunks``: one exp, cos and sin a kick for a whole amplitude sweep)."""
     sig = prm[r, 3]
     x = tau - prm[r, 4]
     g = math.exp(-x * x / (2.0 * sig * sig))
@@ -138,7 +161,7 @@ def _burst(tau: float, prm: NDArray[np.float64], r: int) -> tuple[float, float]:
     om = 2.0 * math.pi * prm[r, 1]
     cs = math.cos(om * x)
     sn = math.sin(om * x)
-    return amp * env * cs, amp * (denv * cs - env * om * sn)
+    return env, cs, denv * cs - env * om * sn
 
 
 @numba.njit(inline="always")
@@ -255,6 +278,36 @@ def _lane_energy(
 
 
 @numba.njit(cache=True)
+def _burst_leads(
+    lanes: NDArray[np.int64], src: NDArray[np.int64], prm: NDArray[np.float64]
+) -> NDArray[np.int64]:
+    """[W] per lane of a chunk (``lanes``: trajectory of each, -1: padding), the earlier lane
+    whose analytic burst is the same but for its amplitude (``prm[r, 1:7]`` equal, both
+    amplitudes nonzero), else -1. ``run_chunks`` computes the burst's shape (:func:`_burst_shape`:
+    an exp, a cos and a sin) once a kick for such lanes, each lane multiplying by its own
+    amplitude as :func:`_burst` does: the same bits, one shape a kick for an amplitude sweep's
+    chunk instead of one a lane."""
+    W = lanes.size
+    lead = np.full(W, -1, dtype=np.int64)
+    for b in range(W):
+        r = lanes[b]
+        if r < 0 or src[r] != 0 or prm[r, 0] == 0.0:
+            continue
+        for a in range(b):
+            ra = lanes[a]
+            if ra < 0 or src[ra] != 0 or prm[ra, 0] == 0.0 or lead[a] >= 0:
+                continue
+            same = True
+            for c in range(1, 7):
+                if prm[ra, c] != prm[r, c]:
+                    same = False
+            if same:
+                lead[b] = a
+                break
+    return lead
+
+
+@numba.njit(cache=True)
 def _drive_end(src: int, prm: NDArray[np.float64], n_table: int) -> float:
     """Trigger time (s) after which a drive of :func:`drive_value` is zero."""
     if src == 0:
@@ -278,6 +331,19 @@ def _primary(x: NDArray[np.float64], phi: NDArray[np.float64], i: int, W: int, g
     for k in range(K):
         acc = vfma(vsplat(phi[i, k]), vload(x, (i * K + k) * W + g), acc)
     return acc
+
+
+@numba.njit(inline="always")
+def _velocity4(p: NDArray[np.float64], phi: NDArray[np.float64], i: int, W: int, g: int) -> Vec4:
+    """:func:`_primary` of ``x = p`` for a block of 4 modes, unrolled: ``phi`` is ``[N, 4]``
+    flattened. Pass 2 reads the contacts' velocities by it, so that pass 1, bound by its
+    multiply-adds, leaves them to pass 2, bound by its square roots (same operations, same
+    order, same bits)."""
+    b = i * 4
+    acc = vfma(vbcast(phi, b), vload(p, b * W + g), vsplat(0.0))
+    acc = vfma(vbcast(phi, b + 1), vload(p, (b + 1) * W + g), acc)
+    acc = vfma(vbcast(phi, b + 2), vload(p, (b + 2) * W + g), acc)
+    return vfma(vbcast(phi, b + 3), vload(p, (b + 3) * W + g), acc)
 
 
 @numba.njit(cache=True)
@@ -461,8 +527,16 @@ def run_chunks(
     n_contacts = N - 1 + far_wall
     heun = heun_kicks == 1
     first_stage = 1.0 / 3.0 if heun else 0.5  # first stage of a damped kick, in kick lengths
-    pairs = W % 8 == 0  # lanes handled eight at a time (two vectors), else four
-    lane_step = 8 if pairs else 4
+    # damped, the primary velocities u' are summed in pass 1 (into ud) or, for blocks of 4
+    # modes (the default chain's), where pass 2 reads them (_velocity4): pass 1 is bound by its
+    # multiply-adds, pass 2 by its square roots (docs/performance.md, section 3)
+    vel4 = damped and K == 4
+    sum_vel = damped and not vel4
+    # pass 1 drifts 16 lanes at a time (four vectors for each coefficient read) where the
+    # chunk allows and it sums no u', else eight (two), else four
+    quads = W % 16 == 0 and not sum_vel
+    pairs = W % 8 == 0
+    lane_step = 16 if quads else 8 if pairs else 4
     # one sample = n_sub steps = n_sub m kicks, each after a drift (the last drift of a step
     # merged with the first of the next), then a last drift
     n_kicks = n_sub * m
@@ -501,6 +575,10 @@ def run_chunks(
         vs = np.zeros(N * W)  # stage velocities of the kick (m/s)
         scratch = np.zeros((N, W))
         dval = np.zeros(W)
+        b_on = np.zeros(W, dtype=np.bool_)  # a burst lane's drive on at this kick, its shape:
+        b_env = np.zeros(W)  # envelope, carrier cosine, slope per unit amplitude (_burst_shape)
+        b_cos = np.zeros(W)
+        b_slope = np.zeros(W)
         ddot = np.zeros(W)
         wall = np.zeros(W)  # 1.0 where the lane's drive is a moving wall
         fdrv = np.zeros(W)  # 1.0 where the lane's drive is a force
@@ -508,6 +586,7 @@ def run_chunks(
         buf_vel = np.zeros(REC_BLOCK * C * W if rec_vel else 0)  # [REC_BLOCK, C, W]
         buf_disp = np.zeros(REC_BLOCK * C * W if rec_disp else 0)
         phi = phi0[o]
+        phif = phi.reshape(N * K)  # [N K] flat, for _velocity4
         d0 = rest[o]
         rec = rec_idx[o]
         x0 = chi[o]
@@ -567,7 +646,10 @@ def run_chunks(
                     t_off = max(t_off, _drive_end(src[r], prm[r], n_table[r]))
             else:
                 wall[b] = 1.0
+        # a lane whose burst is another's but for its amplitude takes that lane's burst shape
+        lead = _burst_leads(lanes, src, prm)
         t = 0.0
+        drives_zero = False  # dval and ddot hold zeros for every lane
         n_rec = n_samples
         for s in range(n_samples):
             # record the state at t = s / rate (into the block buffers, copied out every
@@ -639,12 +721,40 @@ def run_chunks(
                     hk_prev = 0.0
                 dk = kd[kk]
                 t += kdt[kk]
-                # ---- pass 1, per cylinder: the pending kick, the drift, then u and, damped, u'
+                # ---- pass 1, per cylinder: the pending kick, the drift, then u and (sum_vel) u'
                 # (lane groups outside: 7 % less time for the kernel than cylinders outside;
-                # without u' undamped, 4 % less for a sweep of the default chain)
+                # without u' undamped, 4 % less for a sweep of the default chain; 16 lanes at a
+                # time, 4-7 % less than 8: docs/performance.md, section 3)
                 for g in range(0, W, lane_step):
                     for i in range(N):
                         ja = i * W + g
+                        if quads:
+                            fa = hk_prev * vload(force, ja)
+                            fb = hk_prev * vload(force, ja + 4)
+                            fc = hk_prev * vload(force, ja + 8)
+                            fe = hk_prev * vload(force, ja + 12)
+                            ua = vsplat(shift[i])
+                            ub, uc, ue = ua, ua, ua
+                            for k in range(K):
+                                c0 = vsplat(co[dk, i, k, 0])
+                                c1 = vsplat(co[dk, i, k, 1])
+                                c2 = vsplat(co[dk, i, k, 2])
+                                c3 = vsplat(co[dk, i, k, 3])
+                                f = vsplat(phi[i, k])
+                                jm = (i * K + k) * W + g
+                                qa, _ = _mode_drift(q, p, jm, c0, c1, c2, c3, f, fa)
+                                qb, _ = _mode_drift(q, p, jm + 4, c0, c1, c2, c3, f, fb)
+                                qc, _ = _mode_drift(q, p, jm + 8, c0, c1, c2, c3, f, fc)
+                                qe, _ = _mode_drift(q, p, jm + 12, c0, c1, c2, c3, f, fe)
+                                ua = vfma(f, qa, ua)
+                                ub = vfma(f, qb, ub)
+                                uc = vfma(f, qc, uc)
+                                ue = vfma(f, qe, ue)
+                            vstore(u, ja, ua)
+                            vstore(u, ja + 4, ub)
+                            vstore(u, ja + 8, uc)
+                            vstore(u, ja + 12, ue)
+                            continue
                         fa = hk_prev * vload(force, ja)
                         fb = hk_prev * vload(force, ja + 4) if pairs else fa
                         ua = vsplat(shift[i])
@@ -660,18 +770,20 @@ def run_chunks(
                             jm = (i * K + k) * W + g
                             qa, pa = _mode_drift(q, p, jm, c0, c1, c2, c3, f, fa)
                             ua = vfma(f, qa, ua)
-                            if damped:  # u' is read only by the contact dashpots
+                            if sum_vel:  # u' is read only by the contact dashpots
                                 va = vfma(f, pa, va)
                             if pairs:
                                 qb, pb = _mode_drift(q, p, jm + 4, c0, c1, c2, c3, f, fb)
                                 ub = vfma(f, qb, ub)
-                                if damped:
+                                if sum_vel:
                                     vb = vfma(f, pb, vb)
                         vstore(u, ja, ua)
-                        vstore(ud, ja, va)
+                        if sum_vel:
+                            vstore(ud, ja, va)
                         if pairs:
                             vstore(u, ja + 4, ub)
-                            vstore(ud, ja + 4, vb)
+                            if sum_vel:
+                                vstore(ud, ja + 4, vb)
                 hk = kh[kk]
                 hk_prev = hk
                 if (kflag[kk] & 2) != 0:
@@ -683,16 +795,41 @@ def run_chunks(
                     for i in range(N):
                         cs2[i] = hk * im0[i] * (2.0 / 3.0)
                 # ---- the drives at t (in a split step: on the sub-step's side of its breakpoints)
+                # (outside every lane's drive window, all zero: written once, not every kick)
                 side = kside[kk]
-                for b in range(W):
-                    r = lanes[b]
-                    if r >= 0 and side == side:
-                        dval[b], ddot[b] = drive_piece(t, side, r, src, prm, tables, n_table)
-                    elif r >= 0 and t_on <= t < t_off:
-                        dval[b], ddot[b] = drive_value(t, r, src, prm, tables, n_table)
-                    else:
+                if side == side or t_on <= t < t_off:
+                    drives_zero = False
+                    for b in range(W):
+                        r = lanes[b]
+                        if r >= 0 and side == side:
+                            dval[b], ddot[b] = drive_piece(t, side, r, src, prm, tables, n_table)
+                        elif r >= 0 and t_on <= t < t_off:
+                            a = lead[b]  # the lane whose burst shape this lane's drive takes
+                            if a < 0 and src[r] == 0:  # a burst of its own: its shape at t
+                                b_on[b] = _drive_on(t, 0, prm[r, 0], prm[r, 6], prm[r, 2],
+                                                    prm[r, 7], n_table[r])  # fmt: skip
+                                if b_on[b]:
+                                    b_env[b], b_cos[b], b_slope[b] = _burst_shape(
+                                        t - prm[r, 6], prm, r
+                                    )
+                                a = b
+                            if a < 0:  # a table
+                                dval[b], ddot[b] = drive_value(t, r, src, prm, tables, n_table)
+                            elif b_on[a]:
+                                dval[b], ddot[b] = _burst_scaled(
+                                    prm[r, 0], b_env[a], b_cos[a], b_slope[a]
+                                )
+                            else:
+                                dval[b] = 0.0
+                                ddot[b] = 0.0
+                        else:
+                            dval[b] = 0.0
+                            ddot[b] = 0.0
+                elif not drives_zero:
+                    for b in range(W):
                         dval[b] = 0.0
                         ddot[b] = 0.0
+                    drives_zero = True
                 # ---- pass 2, along the contacts (0: actuator, j: between cylinders j-1 and j,
                 # N: far end), carrying the neighbours' values: Hertz forces and the contact
                 # forces at the start velocities, k1; undamped, the forces on the cylinders.
@@ -714,7 +851,7 @@ def run_chunks(
                     dd = vload(ddot, g)
                     drive_force = fd * (f0 + dv)
                     u_prev = vload(u, g)
-                    v_prev = vload(ud, g)
+                    v_prev = _velocity4(p, phif, 0, W, g) if vel4 else vload(ud, g)
                     g_prev = _hertz(wl * (d0[0] + dv - u_prev), beta)
                     vstore(work, g, vload(work, g) + hk * dd * (wl * g_prev - fd * u_prev))
                     f_prev = _actuator_force(g_prev, x0[0], wl, dd, v_prev, drive_force)
@@ -736,7 +873,7 @@ def run_chunks(
                     # stage velocity
                     if N > 1:
                         u1 = vload(u, W + g)
-                        v1 = vload(ud, W + g)
+                        v1 = _velocity4(p, phif, 1, W, g) if vel4 else vload(ud, W + g)
                         gj = _hertz(u_prev - u1, beta)
                         fj = _dashpot(gj, vsplat(x0[1]), v_prev - v1)
                     else:
@@ -751,7 +888,21 @@ def run_chunks(
                     k2_pp = _actuator_force(g_prev, x0[0], wl, dd, va_pp, drive_force)
                     v_pp = v_prev  # cylinder j-2's start velocity
                     u_prev, v_prev, g_prev, f_prev = u1, v1, gj, fj
-                    if heun:  # the second stage velocities into vs; fh and k1 for pass 3
+                    # one loop per case, the primary velocities read from p (vel4) or ud
+                    if heun and vel4:  # the second stage velocities into vs; fh, k1 for pass 3
+                        for j in range(2, N):
+                            u1 = vload(u, j * W + g)
+                            v1 = _velocity4(p, phif, j, W, g)
+                            gj = _hertz(u_prev - u1, beta)
+                            fj = _dashpot(gj, vbcast(x0, j), v_prev - v1)
+                            vstore(fh, j * W + g, gj)
+                            vstore(k1, j * W + g, fj)
+                            chi_l, c1 = vbcast(x0, j - 1), vbcast(cs1, j - 1)
+                            va, k2 = _stage(v_prev, f_prev, fj, va_pp, g_prev, chi_l, c1)
+                            vstore(vs, (j - 2) * W + g, vfma(vbcast(cs2, j - 2), k2_pp - k2, v_pp))
+                            v_pp, va_pp, k2_pp = v_prev, va, k2
+                            u_prev, v_prev, g_prev, f_prev = u1, v1, gj, fj
+                    elif heun:
                         for j in range(2, N):
                             u1 = vload(u, j * W + g)
                             v1 = vload(ud, j * W + g)
@@ -764,7 +915,18 @@ def run_chunks(
                             vstore(vs, (j - 2) * W + g, vfma(vbcast(cs2, j - 2), k2_pp - k2, v_pp))
                             v_pp, va_pp, k2_pp = v_prev, va, k2
                             u_prev, v_prev, g_prev, f_prev = u1, v1, gj, fj
-                    else:  # the midpoint: k2 acts on the cylinders
+                    elif vel4:  # the midpoint: k2 acts on the cylinders
+                        for j in range(2, N):
+                            u1 = vload(u, j * W + g)
+                            v1 = _velocity4(p, phif, j, W, g)
+                            gj = _hertz(u_prev - u1, beta)
+                            fj = _dashpot(gj, vbcast(x0, j), v_prev - v1)
+                            chi_l, c1 = vbcast(x0, j - 1), vbcast(cs1, j - 1)
+                            va, k2 = _stage(v_prev, f_prev, fj, va_pp, g_prev, chi_l, c1)
+                            vstore(force, (j - 2) * W + g, k2_pp - k2)
+                            va_pp, k2_pp = va, k2
+                            u_prev, v_prev, g_prev, f_prev = u1, v1, gj, fj
+                    else:
                         for j in range(2, N):
                             u1 = vload(u, j * W + g)
                             v1 = vload(ud, j * W + g)

@@ -26,6 +26,7 @@ PINNED = {
     "version": "4: overlaps from shifted displacements, fused dashpot and stage",
     4: "e45992e720d993c5d9351c1fcd4e5e38be3cdc5c3f9a433330f5e9484a38df80",
     16: "6b7a895c1c9f0664b0525b6ec3eef6cdb1b815920c990cc8ef6a2b5c42377184",
+    64: "fe520a7c92b64ccc505cc9e18d69043b2c8986cb23919d58d5c4891104c5a8bf",
 }
 
 
@@ -59,6 +60,7 @@ def _kernel_args(n_drives: int) -> dict[str, Any]:
         )
     mp = pytest.MonkeyPatch()
     mp.setattr(simulation, "run_batch", capture)
+    mp.setattr(simulation.numba, "get_num_threads", lambda: 1)  # the chunks of one thread
     try:
         dem.simulate(chain, drives, duration_s=0.4e-3, sample_rate_Hz=250e3)
     finally:
@@ -84,8 +86,11 @@ def _checksum(n_drives: int) -> str:
     return digest.hexdigest()
 
 
-@pytest.mark.parametrize("n_drives", [4, 16])
+@pytest.mark.parametrize("n_drives", [4, 16, 64])
 def test_kernel_bits_are_pinned(n_drives: int) -> None:
-    """4 drives: chunks of four lanes; 16: chunks of eight (two vectors at a time)."""
+    """4 drives: chunks of four lanes; 16: chunks of eight (two vectors at a time); 64: chunks
+    of sixteen (four vectors at a time in pass 1). The checksums do not depend on the chunks:
+    64's was taken with the kernel before it had chunks of sixteen."""
+    assert _kernel_args(n_drives)["lane_traj"].shape[1] == {4: 4, 16: 8, 64: 16}[n_drives]
     assert kernel.NUMERICS_VERSION == PINNED["version"], "new numerics: re-pin the checksums"
     assert _checksum(n_drives) == PINNED[n_drives]

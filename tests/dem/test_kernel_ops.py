@@ -110,7 +110,12 @@ def _counted_run(
         dem.Drive("ltr", "displacement", a * chain.delta0_m, burst=Burst(8.92e3, 5.0))
         for a in np.linspace(0.5, 3.0, n_drives)
     ]
-    dem.simulate(chain, drives, duration_s=8e-6, sample_rate_Hz=250e3, **kw)
+    threads = numba.get_num_threads()
+    numba.set_num_threads(1)  # the chunk width as on one thread: 32 drives, chunks of 16 lanes
+    try:
+        dem.simulate(chain, drives, duration_s=8e-6, sample_rate_Hz=250e3, **kw)
+    finally:
+        numba.set_num_threads(threads)
     for name in ("vload", "vstore", "vsplat", "vbcast", "vfma", "vmax", "vsqrt"):
         monkeypatch.setattr(kernel, name, globals()[f"_{name}"])
     for name, obj in list(vars(kernel).items()):
@@ -127,6 +132,7 @@ def _counted_run(
     assert np.all(np.isfinite(args[24]))  # the Python kernel ran on real numbers
     lane_traj, n_sub, n_samples, far_wall = args[5], args[17], args[18], args[22]
     info = {
+        "width": lane_traj.shape[1],
         "groups": lane_traj.size // 4,
         "n_sub": n_sub,
         "n_samples": n_samples,
@@ -140,11 +146,20 @@ def _small_chain(**update: Any) -> dem.Chain:
     return dem.build_chain(spec)
 
 
+#: blocks of 4 modes (3 resonators, as the default chain's): pass 2 sums u' (``vel4``)
+_FOUR_MODES = {"damping": BENCHMARK_DAMPING, "n_modes": 3}
+
+
 @pytest.mark.parametrize(
     ("label", "update", "kick", "n_drives", "cylinders"),
     [
         ("damped, midpoint", {"damping": BENCHMARK_DAMPING}, "midpoint", 4, None),
         ("damped, Heun", {"damping": BENCHMARK_DAMPING}, "heun3", 4, [5]),
+        ("damped, 16 lanes", {"damping": BENCHMARK_DAMPING}, "midpoint", 32, None),
+        ("damped, 4 modes, midpoint", _FOUR_MODES, "midpoint", 4, None),
+        ("damped, 4 modes, Heun, 16 lanes", _FOUR_MODES, "heun3", 32, [2]),
+        ("damped, 4 modes, 8 lanes", _FOUR_MODES, "midpoint", 16, None),
+        ("undamped contacts, 16 lanes", {}, "midpoint", 32, [4]),
         ("undamped contacts", {}, "midpoint", 16, [1, 3]),
         (
             "free far end, damped",
@@ -171,7 +186,8 @@ def test_kernel_ops_count_what_the_kernel_executes(
     cylinders: list[int] | None,
 ) -> None:
     """Each class's total over a short run (2 samples of 2 steps of 6 kicks, then the last
-    sample recorded) is exactly what ``kernel_ops`` says, for 5 cylinders and 3 block modes."""
+    sample recorded) is exactly what ``kernel_ops`` says, for 5 cylinders and 3 or 4 block
+    modes (u' summed in pass 1, or in pass 2), in chunks of 4, 8 and 16 lanes."""
     chain = _small_chain(**update)
     counted, info = _counted_run(
         monkeypatch, chain, n_drives, cylinders=cylinders, record=("velocity",), dashpot_kick=kick
@@ -189,6 +205,8 @@ def test_kernel_ops_count_what_the_kernel_executes(
         expected = (per_step * steps + ops["record"][cls] * info["n_sub"]) * info["groups"]
         assert counted[cls] == pytest.approx(expected, abs=1e-6), (label, cls)
     assert (chain.contact_damping_ratio > 0) == ("undamped" not in label)
+    assert info["width"] == (16 if "16 lanes" in label else 8 if n_drives >= 16 else 4)
+    assert (chain.n_modes + 1 == 4) == ("4 modes" in label)
 
 
 def test_flops_per_step_by_hand() -> None:

@@ -3,6 +3,8 @@ with them: a drive's result does not depend on the lane, the chunk width or the 
 
 from __future__ import annotations
 
+from typing import Any
+
 import numba
 import numpy as np
 import pytest
@@ -109,3 +111,35 @@ def test_a_drive_gives_the_same_bits_in_any_lane_and_chunk_width(chain: dem.Chai
         np.testing.assert_array_equal(mixed.velocity[pos], alone.velocity[0])
         assert mixed.meta["energy_gain_J"][pos] == alone.meta["energy_gain_J"][0]
     assert np.abs(alone.velocity[0, -1]).max() > 1e-4  # the burst reached the far end
+
+
+@pytest.mark.parametrize(
+    ("chain_name", "kick"),
+    [("chain", "midpoint"), ("dashpot_chain", "midpoint"), ("dashpot_chain", "heun3")],
+)
+def test_a_burst_gives_the_same_bits_beside_bursts_of_its_shape(
+    request: pytest.FixtureRequest, chain_name: str, kick: str
+) -> None:
+    """In chunks of 16 lanes (a batch of 40 on one thread) whose bursts differ by their
+    amplitude, one lane computes a burst shape a kick and the lanes of the same shape take it
+    (``kernel._burst_leads``: bursts of 5 and of 7 cycles here), pass 1 drifts four vectors at a
+    time and, with a dashpot, pass 2 sums the velocities: a drive still gives the bits it gives
+    alone, as the chunk's first lane, a later one, or in the next chunk. Default chain (no
+    dashpot) and the dashpot chain with midpoint and Heun kicks."""
+    chain = request.getfixturevalue(chain_name)
+    drive = dem.Drive("ltr", "displacement", 2.5e-6, burst=Burst(8.92e3, 7.0))
+    others = [_drive("ltr" if k % 5 else "rtl", 0.1 + 0.1 * k) for k in range(39)]
+    others[20] = dem.Drive("ltr", "displacement", 0.7e-6, burst=Burst(8.92e3, 7.0))
+    kw: dict[str, Any] = {"duration_s": 2e-3, "sample_rate_Hz": 250e3, "dashpot_kick": kick}
+    alone = dem.simulate(chain, [drive], **kw)
+    threads = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        for pos in (0, 9, 33):
+            batch = [*others[:pos], drive, *others[pos:]]
+            mixed = dem.simulate(chain, batch, **kw)
+            np.testing.assert_array_equal(mixed.velocity[pos], alone.velocity[0])
+            assert mixed.meta["energy_gain_J"][pos] == alone.meta["energy_gain_J"][0]
+    finally:
+        numba.set_num_threads(threads)
+    assert np.abs(alone.velocity[0, -1]).max() > 1e-5  # the burst reached the far end
