@@ -56,7 +56,8 @@ def kernel_ops(
 
     N cylinders, K = J + 1 block modes, m kicks a step, ``n_sub`` steps a sample, ``dashpot``: a
     contact dashpot on (the kernel's damped kicks), C cylinders whose velocity is recorded.
-    Executed operations, the unneeded ones included (u and u' after a sample's last drift).
+    Executed operations, the unneeded ones included (u, and u' where pass 1 sums it, after a
+    sample's last drift).
 
     - ``pass1``, after every drift (m per step and one per sample): per cylinder the kick length
       x force (1 other); per mode the pending kick (1 fma), the 2x2 drift (2 fma, 2 other) and

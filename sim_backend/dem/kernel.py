@@ -29,10 +29,11 @@ displacement ``u`` in registers (from a shift per cylinder that holds the rest o
 an overlap is one subtraction); one along the contacts, carrying the neighbours' values in
 registers, gives the Hertz forces, the forces at the start velocities and, one contact behind,
 the stage velocities and the forces there (one loop without branches per case: undamped,
-midpoint, Heun; the chain's ends outside it). The primary velocity ``u'``, which only the
-dashpots read, is summed where they read it, in the second pass, for blocks of 4 modes (the
-default chain's; in the first pass otherwise): the first pass is bound by its multiply-adds,
-the second by its square roots. Lanes whose bursts differ only by their amplitude compute the
+midpoint, Heun, the last two once for each source of ``u'``; the chain's ends outside it). The
+primary velocity ``u'``, which only the contact dashpots read, is summed where they read it, in
+the second pass, for blocks of 4 modes (the benchmark chain's: the default chain has 4 modes and
+no dashpot), in the first pass otherwise: the first pass is bound by its multiply-adds, the
+second by its square roots. Lanes whose bursts differ only by their amplitude compute the
 burst's shape once a kick (:func:`_burst_leads`), and no drive is evaluated outside every
 lane's drive window.
 
@@ -42,9 +43,11 @@ taken. Not numba's ``parallel=`` and ``prange``: numba compiles a parallel loop'
 function of its own and links it, with all it calls, into three more libraries (the gufunc
 wrapper, the parallel wrapper, the caller), each optimised by LLVM and turned into machine code
 again, and its parallel passes walk the body's IR besides; the kernel's first-use compile took
-20-26 s so, 6.3-6.6 s now (docs/performance.md, section 3). In the compiled chunk loop, no
-helper inlined by numba takes an array (numba reference-counts the array it binds, around every
-call), and the drives are read by row index (:func:`drive_value`), not as row views.
+20-26 s so (docs/performance.md, section 3). In the compiled chunk loop the helpers numba inlines
+take numbers and vectors, or the arrays the loop already holds (``_mode_drift``,
+``_velocity4``, ``_burst_shape``); :func:`_record`, which took arrays numba reference-counted
+around every call, is a function of its own; the drives are read by row index
+(:func:`drive_value`), not as row views.
 
 Steps split at the drives' breakpoints (``split_steps`` = 1, :mod:`sim_backend.dem.split_steps`):
 an analytic burst's start and end, where a moving wall's velocity jumps and the actuator
@@ -317,7 +320,8 @@ def _drive_end(src: int, prm: NDArray[np.float64], n_table: int) -> float:
 
 #: samples recorded into a chunk's buffer before they are copied to the output arrays: each
 #: lane's run of samples of one cylinder is then 512 B of the output (8 cache lines). The buffer
-#: holds REC_BLOCK x C x W doubles per recorded quantity (127 kB for 31 cylinders and 8 lanes);
+#: holds REC_BLOCK x C x W doubles per recorded quantity (127 kB for 31 cylinders and 8 lanes,
+#: 254 kB for 16);
 #: 16 measured 2-3 % slower on the sweep of ``benchmarks/dem_sweep.py``
 REC_BLOCK = 64
 
@@ -527,9 +531,9 @@ def run_chunks(
     n_contacts = N - 1 + far_wall
     heun = heun_kicks == 1
     first_stage = 1.0 / 3.0 if heun else 0.5  # first stage of a damped kick, in kick lengths
-    # damped, the primary velocities u' are summed in pass 1 (into ud) or, for blocks of 4
-    # modes (the default chain's), where pass 2 reads them (_velocity4): pass 1 is bound by its
-    # multiply-adds, pass 2 by its square roots (docs/performance.md, section 3)
+    # damped (a contact dashpot), the primary velocities u' are summed in pass 1 (into ud) or,
+    # for blocks of 4 modes (the benchmark chain's), where pass 2 reads them (_velocity4): pass 1
+    # is bound by its multiply-adds, pass 2 by its square roots (docs/performance.md, section 3)
     vel4 = damped and K == 4
     sum_vel = damped and not vel4
     # pass 1 drifts 16 lanes at a time (four vectors for each coefficient read) where the
@@ -568,7 +572,7 @@ def run_chunks(
         q = np.zeros(N * K * W)  # [N, K, W]
         p = np.zeros(N * K * W)
         u = np.zeros(N * W)  # [N, W] primary displacement
-        ud = np.zeros(N * W)  # primary velocity
+        ud = np.zeros(N * W)  # primary velocity, summed in pass 1 (sum_vel; else zeros)
         force = np.zeros(N * W)  # contact force on each primary mass (N)
         fh = np.zeros((N + 1) * W)  # [N+1, W] Hertz force of each contact (N)
         k1 = np.zeros((N + 1) * W)  # contact force at the kick's start velocities (N)
@@ -841,8 +845,9 @@ def run_chunks(
                 # Each case has a loop over the contacts between cylinders of its own, without a
                 # branch inside (first contact and far end before and after it): 25 instructions
                 # a contact against 58 with the cases as branches in one loop, 10 cycles a 4-lane
-                # vector against 16 (docs/performance.md, section 3, "Pass 2 without branches").
-                # Its coefficients by vbcast: no negative-index check per read.
+                # vector against 16 on Zen 3 (docs/performance.md, section 3, "Pass 2 without
+                # branches"); the vel4 loops, which sum u' too, 9.9 cycles on Zen 5. Its
+                # coefficients by vbcast: no negative-index check per read.
                 zero = vsplat(0.0)
                 for g in range(0, W, 4):
                     wl = vload(wall, g)

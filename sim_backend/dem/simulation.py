@@ -167,11 +167,23 @@ def _lanes(
 ) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
     """Group trajectories by orientation into chunks of W lanes (padding: -1). The kernel works
     on four lanes at once (one SIMD vector) and best on sixteen (its drifts read each
-    coefficient once for four vectors: 4-7 % less time than on eight, docs/performance.md);
-    smaller batches get eight or four so that the chunks still spread over ``n_threads``
-    threads. The lanes' results do not depend on W."""
+    coefficient once for four vectors: 4-7 % less time than on eight, docs/performance.md):
+    W = 16 where those chunks hold at most 5 % more lanes than chunks of eight (padding) and
+    give each of ``n_threads`` threads two; else 8 from 16 trajectories, else 4, so that the
+    chunks still spread over the threads. A lane's result does not depend on W, except under
+    the early stop (a chunk stops as a whole), for which ``simulate`` passes ``n_threads = 1``:
+    the chunks then depend on the batch alone, never on the machine's threads."""
     R = orient.size
-    W = 16 if R >= 32 * max(1, n_threads) else 8 if R >= 16 else 4
+    per_orient = [int(np.count_nonzero(orient == o)) for o in (0, 1)]
+
+    def lanes(w: int) -> int:
+        return sum(-(-n // w) * w for n in per_orient)
+
+    chunks16 = lanes(16) // 16
+    if lanes(16) <= 1.05 * lanes(8) and chunks16 >= 2 * max(1, n_threads):
+        W = 16
+    else:
+        W = 8 if R >= 16 else 4
     chunks: list[list[int]] = []
     orients: list[int] = []
     for o in (0, 1):
@@ -360,7 +372,8 @@ def _simulate(
             raise ValueError(f"stop_energy_fraction must be > 0, got {stop_energy_fraction!r}")
         stop_every = max(1, round(stop_check_s * sample_rate_Hz))
     energy = np.zeros((R, 6))
-    lane_traj, chunk_orient = _lanes(orient, numba.get_num_threads())
+    # the early stop stops a chunk as a whole: its chunks must not depend on the threads
+    lane_traj, chunk_orient = _lanes(orient, 1 if stop_every > 0 else numba.get_num_threads())
     args = (
         phi0, omega, drift2, chi2, np.sum(phi0**2, axis=2), lane_traj, chunk_orient,
         dkind, src, prm, tables, n_table,

@@ -28,6 +28,12 @@ PINNED = {
     16: "6b7a895c1c9f0664b0525b6ec3eef6cdb1b815920c990cc8ef6a2b5c42377184",
     64: "fe520a7c92b64ccc505cc9e18d69043b2c8986cb23919d58d5c4891104c5a8bf",
 }
+#: the same with Heun's kicks (``dashpot_kick="heun3"``: pass 3), taken with the kernel before
+#: it had chunks of sixteen and summed u' in pass 2
+PINNED_HEUN = {
+    16: "a1b3f466a6e125682663cb79bb0b0b717597cf89458fe1486363c1add84f2aeb",
+    64: "39d7de99cf4e086902e4e462194437eda8166ea5e9c8ad012545cd06792612c9",
+}
 
 
 def _tent(n: int) -> np.ndarray:  # type: ignore[type-arg]
@@ -35,9 +41,10 @@ def _tent(n: int) -> np.ndarray:  # type: ignore[type-arg]
     return np.minimum(k, n - 1 - k) / 32.0  # exact binary fractions
 
 
-def _kernel_args(n_drives: int) -> dict[str, Any]:
+def _kernel_args(n_drives: int, kick: str = "midpoint") -> dict[str, Any]:
     """The keyword arguments ``simulate`` gives ``run_batch`` for ``n_drives`` waveform drives
-    (both directions, displacement and force), float inputs rounded to float32."""
+    (both directions, displacement and force) and the dashpot ``kick``, float inputs rounded to
+    float32."""
     chain = dem.build_chain(benchmark_chain_spec())
     captured: dict[str, Any] = {}
 
@@ -62,7 +69,7 @@ def _kernel_args(n_drives: int) -> dict[str, Any]:
     mp.setattr(simulation, "run_batch", capture)
     mp.setattr(simulation.numba, "get_num_threads", lambda: 1)  # the chunks of one thread
     try:
-        dem.simulate(chain, drives, duration_s=0.4e-3, sample_rate_Hz=250e3)
+        dem.simulate(chain, drives, duration_s=0.4e-3, sample_rate_Hz=250e3, dashpot_kick=kick)
     finally:
         mp.undo()
     outputs = ("vel", "disp", "drv", "energy")
@@ -76,8 +83,8 @@ def _kernel_args(n_drives: int) -> dict[str, Any]:
     return captured
 
 
-def _checksum(n_drives: int) -> str:
-    args = _kernel_args(n_drives)
+def _checksum(n_drives: int, kick: str = "midpoint") -> str:
+    args = _kernel_args(n_drives, kick)
     kernel.run_batch(**args)
     assert np.all(np.isfinite(args["vel"])) and np.abs(args["vel"]).max() > 0
     digest = hashlib.sha256()
@@ -94,3 +101,10 @@ def test_kernel_bits_are_pinned(n_drives: int) -> None:
     assert _kernel_args(n_drives)["lane_traj"].shape[1] == {4: 4, 16: 8, 64: 16}[n_drives]
     assert kernel.NUMERICS_VERSION == PINNED["version"], "new numerics: re-pin the checksums"
     assert _checksum(n_drives) == PINNED[n_drives]
+
+
+@pytest.mark.parametrize("n_drives", [16, 64])
+def test_kernel_bits_with_heun_kicks_are_pinned(n_drives: int) -> None:
+    """Heun's kicks, in chunks of eight and of sixteen lanes."""
+    assert kernel.NUMERICS_VERSION == PINNED["version"], "new numerics: re-pin the checksums"
+    assert _checksum(n_drives, "heun3") == PINNED_HEUN[n_drives]

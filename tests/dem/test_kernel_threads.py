@@ -122,3 +122,48 @@ def test_no_kernel_function_is_compiled_with_parallel() -> None:
     }
     assert "sim_backend.dem.kernel.run_chunks" in found
     assert [name for name, d in found.items() if d.targetoptions.get("parallel")] == []
+
+
+def _chunk_width(
+    monkeypatch: pytest.MonkeyPatch, threads: int, n_ltr: int, n_rtl: int, **kw: Any
+) -> int:
+    """The chunk width ``simulate`` gives the kernel for ``n_ltr`` + ``n_rtl`` bursts on a
+    machine of ``threads`` numba threads (the kernel not run)."""
+    chain = dem.build_chain(benchmark_chain_spec())
+    drives = [
+        dem.Drive(d, "displacement", chain.delta0_m * (0.2 + 0.01 * r), burst=Burst(f, 5.0))
+        for d, f, n in (("ltr", 8.92e3, n_ltr), ("rtl", 6.63e3, n_rtl))
+        for r in range(n)
+    ]
+    captured: list[tuple[Any, ...]] = []
+    monkeypatch.setattr(simulation, "run_batch", lambda *a: captured.append(a))
+    monkeypatch.setattr(simulation.numba, "get_num_threads", lambda: threads)
+    dem.simulate(chain, drives, duration_s=0.1e-3, sample_rate_Hz=200e3, **kw)
+    monkeypatch.undo()
+    return int(captured[0][5].shape[1])  # lane_traj [chunks, W]
+
+
+def test_the_chunks_of_an_early_stop_do_not_depend_on_the_threads(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The early stop stops a chunk as a whole (its lanes' recorded samples and end energies
+    depend on which lanes share it), so its chunks depend on the batch alone: 32 + 32 bursts
+    get chunks of 16 on 1 thread and on 8. Without it the chunks spread over the threads
+    (16 on 1 thread, 8 on 8: each thread two chunks at least)."""
+    stop = {"stop_energy_fraction": 1e-3}
+    assert _chunk_width(monkeypatch, 1, 32, 32, **stop) == 16
+    assert _chunk_width(monkeypatch, 8, 32, 32, **stop) == 16
+    assert _chunk_width(monkeypatch, 1, 32, 32) == 16
+    assert _chunk_width(monkeypatch, 8, 32, 32) == 8
+
+
+@pytest.mark.parametrize(
+    ("n_ltr", "n_rtl", "width"),
+    [(16, 16, 16), (32, 0, 16), (17, 15, 8), (32, 8, 8), (32, 16, 16), (8, 7, 4), (12, 4, 8)],
+)
+def test_chunks_of_16_only_where_they_pad_no_more_than_5_percent(
+    monkeypatch: pytest.MonkeyPatch, n_ltr: int, n_rtl: int, width: int
+) -> None:
+    """Chunks hold one orientation: 17 LTR + 15 RTL in chunks of 16 would run 48 lanes for 32
+    trajectories (40 in chunks of 8), for a kernel only 4-7 % faster a lane."""
+    assert _chunk_width(monkeypatch, 1, n_ltr, n_rtl) == width

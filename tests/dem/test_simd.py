@@ -12,6 +12,7 @@ from numba.core.errors import TypingError
 
 from instruments.burst import Burst
 from sim_backend import dem
+from sim_backend.dem import simulation
 from sim_backend.dem.kernel_cache import install_cache_locator
 from sim_backend.dem.simd import vbcast, vfma, vlane, vload, vmax, vsplat, vsqrt, vstore
 
@@ -120,22 +121,25 @@ def test_a_drive_gives_the_same_bits_in_any_lane_and_chunk_width(chain: dem.Chai
 def test_a_burst_gives_the_same_bits_beside_bursts_of_its_shape(
     request: pytest.FixtureRequest, chain_name: str, kick: str
 ) -> None:
-    """In chunks of 16 lanes (a batch of 40 on one thread) whose bursts differ by their
-    amplitude, one lane computes a burst shape a kick and the lanes of the same shape take it
-    (``kernel._burst_leads``: bursts of 5 and of 7 cycles here), pass 1 drifts four vectors at a
-    time and, with a dashpot, pass 2 sums the velocities: a drive still gives the bits it gives
-    alone, as the chunk's first lane, a later one, or in the next chunk. Default chain (no
-    dashpot) and the dashpot chain with midpoint and Heun kicks."""
+    """In chunks of 16 lanes (32 LTR + 16 RTL bursts on one thread) whose bursts differ by
+    their amplitude, one lane computes a burst shape a kick and the lanes of the same shape take
+    it (``kernel._burst_leads``: bursts of 5 and of 7 cycles here), pass 1 drifts four vectors
+    at a time and, with a dashpot, pass 2 sums the velocities: a 7-cycle drive still gives the
+    bits it gives alone, as the lane that computes its shape (first lane; first 7-cycle lane of
+    the next chunk) or as one that takes it from an earlier lane. Default chain (no dashpot)
+    and the dashpot chain with midpoint and Heun kicks."""
     chain = request.getfixturevalue(chain_name)
     drive = dem.Drive("ltr", "displacement", 2.5e-6, burst=Burst(8.92e3, 7.0))
-    others = [_drive("ltr" if k % 5 else "rtl", 0.1 + 0.1 * k) for k in range(39)]
-    others[20] = dem.Drive("ltr", "displacement", 0.7e-6, burst=Burst(8.92e3, 7.0))
+    others = [_drive("ltr" if k % 3 else "rtl", 0.1 + 0.08 * k) for k in range(47)]
+    others[2] = dem.Drive("ltr", "displacement", 0.7e-6, burst=Burst(8.92e3, 7.0))
+    orient = np.array([0 if d.direction == "ltr" else 1 for d in [drive, *others]])
+    assert simulation._lanes(orient, 1)[0].shape[1] == 16
     kw: dict[str, Any] = {"duration_s": 2e-3, "sample_rate_Hz": 250e3, "dashpot_kick": kick}
     alone = dem.simulate(chain, [drive], **kw)
     threads = numba.get_num_threads()
     numba.set_num_threads(1)
     try:
-        for pos in (0, 9, 33):
+        for pos in (0, 9, 40):
             batch = [*others[:pos], drive, *others[pos:]]
             mixed = dem.simulate(chain, batch, **kw)
             np.testing.assert_array_equal(mixed.velocity[pos], alone.velocity[0])
