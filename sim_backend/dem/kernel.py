@@ -393,6 +393,25 @@ def _copy_out(
 
 
 @numba.njit(inline="always")
+def _mode_coefficients(
+    co: NDArray[np.float64],  # [drift kinds, N, K, 4] drift coefficients
+    phi: NDArray[np.float64],  # [N, K]
+    dk: int,
+    i: int,
+    k: int,
+) -> tuple[Vec4, Vec4, Vec4, Vec4, Vec4]:
+    """Mode ``k`` of cylinder ``i``'s drift of kind ``dk`` in every lane: the 2x2 drift
+    ``c0 .. c3`` and its primary component ``phi`` (:func:`_mode_drift`'s ``f``)."""
+    return (
+        vsplat(co[dk, i, k, 0]),
+        vsplat(co[dk, i, k, 1]),
+        vsplat(co[dk, i, k, 2]),
+        vsplat(co[dk, i, k, 3]),
+        vsplat(phi[i, k]),
+    )
+
+
+@numba.njit(inline="always")
 def _mode_drift(
     q: NDArray[np.float64],  # [N K W] flat
     p: NDArray[np.float64],
@@ -440,6 +459,53 @@ def _stage(
     velocities, ``va_left`` of its left cylinder (Hertz force ``fh_left``, factor ``chi_left``)."""
     va = vfma(c, f_left - f_right, v)
     return va, _dashpot(fh_left, chi_left, va_left - va)
+
+
+@numba.njit(inline="always")
+def _contact(
+    chi: NDArray[np.float64],  # [N+1] Hunt-Crossley factors (s/m)
+    cs1: NDArray[np.float64],  # [N] first stage velocity step per force (m/s/N)
+    j: int,
+    beta: float,
+    u_prev: Vec4,
+    v_prev: Vec4,
+    g_prev: Vec4,
+    f_prev: Vec4,
+    va_pp: Vec4,
+    u1: Vec4,
+    v1: Vec4,
+) -> tuple[Vec4, Vec4, Vec4, Vec4]:
+    """A damped kick at contact ``j`` (between cylinders j-1 and j of displacements ``u_prev``,
+    ``u1`` (m) and start velocities ``v_prev``, ``v1`` (m/s)): its Hertz force ``gj`` and its
+    force ``fj`` at the start velocities (N), and one contact behind, cylinder j-1's stage
+    velocity ``va`` and contact j-1's force ``k2`` at the stage velocities (its Hertz force
+    ``g_prev``, its force ``f_prev``; cylinder j-2's stage velocity ``va_pp``)."""
+    gj = _hertz(u_prev - u1, beta)
+    fj = _dashpot(gj, vbcast(chi, j), v_prev - v1)
+    va, k2 = _stage(v_prev, f_prev, fj, va_pp, g_prev, vbcast(chi, j - 1), vbcast(cs1, j - 1))
+    return gj, fj, va, k2
+
+
+@numba.njit(inline="always")
+def _heun_keep(
+    fh: NDArray[np.float64],  # [N+1, W] flat
+    k1: NDArray[np.float64],
+    vs: NDArray[np.float64],  # [N, W] flat
+    cs2: NDArray[np.float64],  # [N] second stage velocity step per force (m/s/N)
+    j: int,
+    W: int,
+    g: int,
+    gj: Vec4,
+    fj: Vec4,
+    dk2: Vec4,
+    v_pp: Vec4,
+) -> None:
+    """Heun's kick at contact ``j``: keeps its Hertz force and its force at the start velocities
+    for pass 3, and cylinder j-2's second stage velocity ``v_pp + cs2 dk2`` (``dk2``: the net
+    stage force on it, N)."""
+    vstore(fh, j * W + g, gj)
+    vstore(k1, j * W + g, fj)
+    vstore(vs, (j - 2) * W + g, vfma(vbcast(cs2, j - 2), dk2, v_pp))
 
 
 @numba.njit(inline="always")
@@ -740,11 +806,7 @@ def run_chunks(
                             ua = vsplat(shift[i])
                             ub, uc, ue = ua, ua, ua
                             for k in range(K):
-                                c0 = vsplat(co[dk, i, k, 0])
-                                c1 = vsplat(co[dk, i, k, 1])
-                                c2 = vsplat(co[dk, i, k, 2])
-                                c3 = vsplat(co[dk, i, k, 3])
-                                f = vsplat(phi[i, k])
+                                c0, c1, c2, c3, f = _mode_coefficients(co, phi, dk, i, k)
                                 jm = (i * K + k) * W + g
                                 qa, _ = _mode_drift(q, p, jm, c0, c1, c2, c3, f, fa)
                                 qb, _ = _mode_drift(q, p, jm + 4, c0, c1, c2, c3, f, fb)
@@ -766,11 +828,7 @@ def run_chunks(
                         ub = ua
                         vb = vsplat(0.0)
                         for k in range(K):
-                            c0 = vsplat(co[dk, i, k, 0])
-                            c1 = vsplat(co[dk, i, k, 1])
-                            c2 = vsplat(co[dk, i, k, 2])
-                            c3 = vsplat(co[dk, i, k, 3])
-                            f = vsplat(phi[i, k])
+                            c0, c1, c2, c3, f = _mode_coefficients(co, phi, dk, i, k)
                             jm = (i * K + k) * W + g
                             qa, pa = _mode_drift(q, p, jm, c0, c1, c2, c3, f, fa)
                             ua = vfma(f, qa, ua)
@@ -894,54 +952,38 @@ def run_chunks(
                     v_pp = v_prev  # cylinder j-2's start velocity
                     u_prev, v_prev, g_prev, f_prev = u1, v1, gj, fj
                     # one loop per case, the primary velocities read from p (vel4) or ud
+                    # one loop per case and source of u' (p summed by _velocity4, or ud): a
+                    # select between the two inside one loop cost 2.5 %
                     if heun and vel4:  # the second stage velocities into vs; fh, k1 for pass 3
                         for j in range(2, N):
-                            u1 = vload(u, j * W + g)
-                            v1 = _velocity4(p, phif, j, W, g)
-                            gj = _hertz(u_prev - u1, beta)
-                            fj = _dashpot(gj, vbcast(x0, j), v_prev - v1)
-                            vstore(fh, j * W + g, gj)
-                            vstore(k1, j * W + g, fj)
-                            chi_l, c1 = vbcast(x0, j - 1), vbcast(cs1, j - 1)
-                            va, k2 = _stage(v_prev, f_prev, fj, va_pp, g_prev, chi_l, c1)
-                            vstore(vs, (j - 2) * W + g, vfma(vbcast(cs2, j - 2), k2_pp - k2, v_pp))
+                            u1, v1 = vload(u, j * W + g), _velocity4(p, phif, j, W, g)
+                            gj, fj, va, k2 = _contact(x0, cs1, j, beta, u_prev, v_prev, g_prev,
+                                                      f_prev, va_pp, u1, v1)  # fmt: skip
+                            _heun_keep(fh, k1, vs, cs2, j, W, g, gj, fj, k2_pp - k2, v_pp)
                             v_pp, va_pp, k2_pp = v_prev, va, k2
                             u_prev, v_prev, g_prev, f_prev = u1, v1, gj, fj
                     elif heun:
                         for j in range(2, N):
-                            u1 = vload(u, j * W + g)
-                            v1 = vload(ud, j * W + g)
-                            gj = _hertz(u_prev - u1, beta)
-                            fj = _dashpot(gj, vbcast(x0, j), v_prev - v1)
-                            vstore(fh, j * W + g, gj)
-                            vstore(k1, j * W + g, fj)
-                            chi_l, c1 = vbcast(x0, j - 1), vbcast(cs1, j - 1)
-                            va, k2 = _stage(v_prev, f_prev, fj, va_pp, g_prev, chi_l, c1)
-                            vstore(vs, (j - 2) * W + g, vfma(vbcast(cs2, j - 2), k2_pp - k2, v_pp))
+                            u1, v1 = vload(u, j * W + g), vload(ud, j * W + g)
+                            gj, fj, va, k2 = _contact(x0, cs1, j, beta, u_prev, v_prev, g_prev,
+                                                      f_prev, va_pp, u1, v1)  # fmt: skip
+                            _heun_keep(fh, k1, vs, cs2, j, W, g, gj, fj, k2_pp - k2, v_pp)
                             v_pp, va_pp, k2_pp = v_prev, va, k2
                             u_prev, v_prev, g_prev, f_prev = u1, v1, gj, fj
                     elif vel4:  # the midpoint: k2 acts on the cylinders
                         for j in range(2, N):
-                            u1 = vload(u, j * W + g)
-                            v1 = _velocity4(p, phif, j, W, g)
-                            gj = _hertz(u_prev - u1, beta)
-                            fj = _dashpot(gj, vbcast(x0, j), v_prev - v1)
-                            chi_l, c1 = vbcast(x0, j - 1), vbcast(cs1, j - 1)
-                            va, k2 = _stage(v_prev, f_prev, fj, va_pp, g_prev, chi_l, c1)
+                            u1, v1 = vload(u, j * W + g), _velocity4(p, phif, j, W, g)
+                            gj, fj, va_pp, k2 = _contact(x0, cs1, j, beta, u_prev, v_prev, g_prev,
+                                                         f_prev, va_pp, u1, v1)  # fmt: skip
                             vstore(force, (j - 2) * W + g, k2_pp - k2)
-                            va_pp, k2_pp = va, k2
-                            u_prev, v_prev, g_prev, f_prev = u1, v1, gj, fj
+                            u_prev, v_prev, g_prev, f_prev, k2_pp = u1, v1, gj, fj, k2
                     else:
                         for j in range(2, N):
-                            u1 = vload(u, j * W + g)
-                            v1 = vload(ud, j * W + g)
-                            gj = _hertz(u_prev - u1, beta)
-                            fj = _dashpot(gj, vbcast(x0, j), v_prev - v1)
-                            chi_l, c1 = vbcast(x0, j - 1), vbcast(cs1, j - 1)
-                            va, k2 = _stage(v_prev, f_prev, fj, va_pp, g_prev, chi_l, c1)
+                            u1, v1 = vload(u, j * W + g), vload(ud, j * W + g)
+                            gj, fj, va_pp, k2 = _contact(x0, cs1, j, beta, u_prev, v_prev, g_prev,
+                                                         f_prev, va_pp, u1, v1)  # fmt: skip
                             vstore(force, (j - 2) * W + g, k2_pp - k2)
-                            va_pp, k2_pp = va, k2
-                            u_prev, v_prev, g_prev, f_prev = u1, v1, gj, fj
+                            u_prev, v_prev, g_prev, f_prev, k2_pp = u1, v1, gj, fj, k2
                     if N > 1:  # the far end: cylinder N-1's stage velocity, contact N-1's k2
                         gj = _far_end_hertz(u_prev, far_rest, beta, far_wall)
                         fj = _far_end_force(gj, x0[N], v_prev, far_wall, f0)
