@@ -16,6 +16,7 @@ import sys
 from typing import Any, TextIO
 
 from daq.cli.biafc import CliError
+from protocols.one_line import first_line
 
 __all__ = ["add_arguments", "print_findings", "run"]
 
@@ -78,7 +79,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         bf = load_bench(args.bench)
     except (ConfigError, OSError) as exc:
-        raise CliError(str(exc).splitlines()[0]) from None
+        raise CliError(first_line(exc)) from None
     test = None
     if args.move:
         try:
@@ -104,10 +105,10 @@ def run(args: argparse.Namespace) -> int:
     except (BenchInUse, ConfigError, DriverNotInstalledError) as exc:  # refused, as run_protocol
         # refuses them (exit 2): another process drives the bench, the bench file, a driver not
         # installed (it was exit 1 here); nothing was opened
-        print(f"biafc check: refused: {str(exc).splitlines()[0]}", file=sys.stderr)
+        print(f"biafc check: refused: {first_line(exc)}", file=sys.stderr)
         return 2
     except (InstrumentError, OSError) as exc:
-        print(f"biafc check: cannot connect: {str(exc).splitlines()[0]}", file=sys.stderr)
+        print(f"biafc check: cannot connect: {first_line(exc)}", file=sys.stderr)
         return 1
     unsafe = None
     try:
@@ -135,7 +136,7 @@ def run(args: argparse.Namespace) -> int:
                 try:
                     findings += preflight.check_burst(bf, inst, test)
                 except Exception as exc:  # as the settings' (preflight._attempt): one line
-                    said = str(exc).splitlines()[0] if str(exc) else ""
+                    said = first_line(exc) if str(exc) else ""
                     if not isinstance(exc, InstrumentError | ValueError):  # not foreseen: name it
                         said = f"{type(exc).__name__}: {said}"
                     findings.append(

@@ -32,6 +32,7 @@ from typing import Any, TextIO
 
 from daq.cli.biafc import CliError
 from daq.cli.stop_signals import leave_the_terminal, stop_signals
+from protocols.one_line import first_line
 
 __all__ = ["add_arguments", "main", "run"]
 
@@ -411,9 +412,9 @@ def _connect(
     try:
         instruments = connect_bench(bf, seed=seed)
     except (ConfigError, DriverNotInstalledError) as exc:  # the bench file, the installation
-        raise CliError(str(exc).splitlines()[0]) from None  # (a driver), the bench in use: 2
+        raise CliError(first_line(exc)) from None  # (a driver), the bench in use: 2
     except InstrumentError as exc:  # an instrument that does not answer: not a refused request
-        raise _ConnectFailed(str(exc).splitlines()[0]) from None
+        raise _ConnectFailed(first_line(exc)) from None
     engine = RunEngine(
         pf,
         bf,

@@ -29,6 +29,7 @@ from daq.cli.out_check import can_write
 from daq.cli.simulate_request import simulate_request_error, within
 from instruments.burst import NAMED_BURSTS
 from instruments.units import UnitError, parse_quantity
+from protocols.one_line import first_line
 from sim_backend.dem.integrators import integrator_error
 from sim_backend.dem.step_limit import StepTooLargeError
 
@@ -195,7 +196,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         burst = _burst(args, f_center)
     except ValueError as exc:  # instruments.burst's own refusal
-        raise CliError(str(exc).splitlines()[0]) from None
+        raise CliError(first_line(exc)) from None
     option = _burst_option(args)
     why = simulate_request_error(duration, rate, burst, chain.n + 1, burst_option=option)
     if why is not None:

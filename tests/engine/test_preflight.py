@@ -308,3 +308,19 @@ def test_check_refuses_a_missing_driver_as_run_protocol_does(
     err = capsys.readouterr().err.strip().splitlines()
     assert err[-1].startswith("biafc check: refused: NI-DAQmx driver not installed"), err
     assert opened == []
+
+
+def test_an_instrument_error_without_a_message_is_one_line_exit_1(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A connect that fails with an empty message (a driver's bare ``InstrumentError()``) ended
+    ``biafc check`` in an IndexError's traceback: the message's first line of nothing."""
+    from instruments.errors import InstrumentError
+
+    def fail(*a: Any, **k: Any) -> Any:
+        raise InstrumentError()
+
+    monkeypatch.setattr(daq.connect, "connect_bench", fail)
+    assert main(["check"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["biafc check: cannot connect: InstrumentError"], err
