@@ -2,6 +2,9 @@
 
 Written from Zaber's ASCII protocol manual: ``/<device> <axis> [<message id>] <command>``, reply
 ``@<device> <axis> [<id>] <OK|RJ> <IDLE|BUSY> <flag> <data>`` (the id echoed when one was sent).
+The reply's axis is the command's scope, as in the manual: "The reply scope. 0 for the device
+or all axes, 1 onwards for an individual axis" (``/1 get pos``, ``/1 0 home``, ``/1 warnings``
+answer ``@01 0 ...``; ``/1 1 get pos`` answers ``@01 1 ...``).
 The microstep is the device's own: full-step length / ``resolution`` (default 64), e.g. 0.047625
 um on an X-LSM; ``get resolution``, ``get limit.min/max``, ``get version`` answer as the device,
 and its id as firmware 7 names it (``get device.id``; ``deviceid`` is firmware 6's name and is
@@ -100,6 +103,8 @@ class ZaberEmulator:
         self._stopping = False  # the motion under way is the deceleration after a stop
         self.commands: list[str] = []
         self._id: int | None = None
+        #: the reply scope: 0 for a command to the device (axis 0 or none), else this axis
+        self._scope = self.axis
 
     # --- state for the world ------------------------------------------------------------
     def _steps_now(self) -> float:
@@ -192,7 +197,7 @@ class ZaberEmulator:
         status = "BUSY" if self.busy() else "IDLE"
         mid = "" if self._id is None else f"{self._id} "
         verdict = "OK" if ok else "RJ"
-        line = f"@{self.device:02d} {self.axis} {mid}{verdict} {status} {self.flag} {data}"
+        line = f"@{self.device:02d} {self._scope} {mid}{verdict} {status} {self.flag} {data}"
         if self.checksum:
             line += f":{-sum(line[1:].encode('ascii')) & 0xFF:02X}"
         return line
@@ -213,9 +218,12 @@ class ZaberEmulator:
         text = message.decode("ascii", "replace").strip()
         self.commands.append(text)
         self._id = None
+        self._scope = self.axis
         if not text.startswith("/"):
             return None
         parts = text[1:].split()
+        if len(parts) > 1 and not parts[1].isdigit():  # no axis (``/1 warnings``): the device
+            parts.insert(1, "0")
         try:
             dev = int(parts[0]) if parts else 0
             axis = int(parts[1]) if len(parts) > 1 else 0
@@ -223,6 +231,8 @@ class ZaberEmulator:
             return None
         if dev not in (0, self.device):
             return None
+        if axis == 0:  # device scope: the manual's reply scope is 0
+            self._scope = 0
         words = parts[2:]
         if words and words[0].isdigit():  # message id 0..99
             self._id = int(words[0])

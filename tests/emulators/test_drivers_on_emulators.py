@@ -176,6 +176,21 @@ def test_stage_connects_on_firmware_7_and_6(clock: SimClock, firmware: int) -> N
     assert identity["firmware"] == ("7.29" if firmware == 7 else "6.28")
 
 
+def test_stage_addressed_to_the_device_takes_the_device_scope_replies(clock: SimClock) -> None:
+    """A stage configured with axis 0 (the device) sends every command at device scope, and a
+    real device answers those with axis 0 (the manual's reply scope): the driver takes them,
+    none refused as from another axis. The emulator answered with axis 1 before."""
+    emu = ZaberEmulator(clock, model="X-LSM500A")
+    settings = ZaberSettings(clock=clock, model="X-LSM500A", axis=0)
+    stage = ZaberStage(SimTransport(emu, "stage", 1.0, clock), settings)
+    stage.connect()
+    stage.home()
+    stage.move_to(0.1)
+    stage.safe_state()
+    assert stage.position() == pytest.approx(0.1, abs=1e-6) and stage.is_homed()
+    assert emu.commands and all(c.startswith("/1 0 ") for c in emu.commands)
+
+
 def test_a_higher_warning_does_not_hide_the_missing_reference(clock: SimClock) -> None:
     """A reply shows only the flag of highest priority: a supply-voltage warning (WV) hid WR,
     and an unhomed stage read as homed (the run then skipped homing and moved)."""

@@ -72,3 +72,24 @@ def test_a_wrong_baud_rate_in_the_bench_file_fails_on_the_simulated_bench() -> N
     text = text.replace("baud_rate: 115200              # Zaber", "baud_rate: 9600  # Zaber")
     with pytest.raises(InstrumentTimeout, match="stage"):
         connect_bench(parse_bench(text))
+
+
+@pytest.mark.parametrize(
+    ("command", "scope"),
+    [
+        (b"/1 0 get pos", "0"),
+        (b"/1 0 home", "0"),
+        (b"/1 0 stop", "0"),
+        (b"/1 warnings", "0"),  # no axis field: the device
+        (b"/1 0 07 get pos", "0"),  # with a message id
+        (b"/1 1 get pos", "1"),
+    ],
+)
+def test_zaber_reply_axis_is_the_command_scope(command: bytes, scope: str) -> None:
+    """Zaber's manual: the reply's axis field is "the reply scope. 0 for the device or all
+    axes, 1 onwards for an individual axis". The emulator answered a command to the device with
+    its own axis number (``@01 1``), and ignored ``/1 warnings`` (no axis field)."""
+    from sim_backend.emulators import ZaberEmulator
+
+    reply = ZaberEmulator(SimClock()).handle(command)
+    assert reply is not None and reply.split()[:2] == ["@01", scope]
