@@ -1262,15 +1262,22 @@ def _not_confirmed_off(instruments: Any, channels: list[int]) -> list[str]:
 
 def _bench_identity(bench_file: Any) -> tuple[str, ...] | None:
     """What a safe state is of: the simulated bench, or a lab bench's generator and stage by
-    their addresses (as written, case aside: no name lookup in the window's thread). A bench
-    file edited in a comment, or renamed, names the same instruments (a reviewer: the mark
-    had been tied to the file's text)."""
+    their addresses, each spelling that certainly names the same resource one key
+    (:func:`instruments.transport.same_resource_key`: ``tcpip::h::instr`` is
+    ``TCPIP0::h::inst0::INSTR``, ``com3`` ``COM3``; no name lookup in the window's thread).
+    Two addresses that may or may not be one instrument stay two: the mark stays up (before,
+    the address as written, upper-cased, which kept it up for the same generator re-typed,
+    and took it down for ``/dev/ttyusb0`` after ``/dev/ttyUSB0``). A bench file edited in a
+    comment, or renamed, names the same instruments (a reviewer: the mark had been tied to
+    the file's text)."""
+    from instruments.transport import same_resource_key
+
     if bench_file is None:
         return None
     b = bench_file.bench
     if b.simulated:  # (a lab bench file may keep a simulation block: it is not simulated)
         return ("simulated",)
-    return ("lab", b.generator.resource.strip().upper(), b.stage.resource.strip().upper())
+    return ("lab", same_resource_key(b.generator.resource), same_resource_key(b.stage.resource))
 
 
 def _first(exc: BaseException) -> str:

@@ -135,3 +135,121 @@ def test_unsafe_goes_only_with_a_read_back_of_the_same_instruments(
     win.bench_file = commented
     win._clear_unsafe_mark("taken down")
     assert win._unsafe_mark is None
+
+
+LAB = Path(__file__).resolve().parents[2] / "protocols" / "benches" / "lab_bench.yaml"
+
+
+def _lab_bench(path: Path, generator: str, stage: str) -> Path:
+    """The lab bench template with the generator and the stage at these addresses (written
+    quoted: a YAML plain scalar would lose the spaces around them)."""
+    text = LAB.read_text().replace("TCPIP0::192.168.1.10::INSTR", f'"{generator}"')
+    path.write_text(text.replace("ASRL4::INSTR ", f'"{stage}"', 1))
+    return path
+
+
+def _unsafe_lab_window(qtbot: Any, tmp_path: Path, generator: str, stage: str) -> Any:
+    """The window on a lab bench file naming ``generator`` and ``stage`` (the instruments
+    themselves simulated: the bench file only names them), after a run that ended UNSAFE;
+    then the outputs read back off at each connect."""
+    from daq.gui.main_window import MainWindow
+    from protocols.bench import load_bench
+
+    from .conftest import SMOKE
+
+    simulated, unsafe_first = load_bench(None), silent_generator(runs=1)
+    bench = _lab_bench(tmp_path / "lab.yaml", generator, stage)
+    win = MainWindow(bench, SMOKE, assembler=lambda bf, seed: unsafe_first(simulated, seed))
+    win.confirm_close = lambda: True  # type: ignore[method-assign]
+    qtbot.addWidget(win)
+    win.show()
+    win.run_panel.out_edit.setText(str(tmp_path / "u.h5"))
+    connect(qtbot, win)
+    with qtbot.waitSignal(win.run_finished, timeout=60_000) as blocker:
+        win.run_panel.start_button.click()
+    assert blocker.args == ["unsafe"]
+    assert win.bench_panel.status_label.text().startswith("✗ UNSAFE")
+    qtbot.waitUntil(lambda: win.bench_panel.connect_button.isEnabled(), timeout=10_000)
+    return win
+
+
+def test_unsafe_goes_when_the_same_bench_is_reopened_with_its_addresses_retyped(
+    qtbot: Any, tmp_path: Path
+) -> None:
+    """A physicist re-typed the bench file's addresses (the same generator and stage): the
+    mark stayed up however often they read back off (the addresses were compared as
+    written, case aside)."""
+    win = _unsafe_lab_window(qtbot, tmp_path, "TCPIP0::192.168.1.10::INSTR", "COM4")
+    retyped = _lab_bench(tmp_path / "retyped.yaml", " tcpip::192.168.1.10::inst0::instr ", "com4 ")
+    assert win.load_bench(retyped)
+    connect(qtbot, win)  # every output reads back off, the stage at rest
+    label = win.bench_panel.status_label
+    assert not label.text().startswith("✗ UNSAFE") and "b00000" not in label.styleSheet()
+    assert any("UNSAFE is taken down" in line for line in win.log_view.lines[-3:])
+
+
+def test_unsafe_stays_when_the_reopened_bench_names_another_stage_or_generator(
+    qtbot: Any, tmp_path: Path
+) -> None:
+    """Another address keeps the mark up, the read-back off whatever: another serial device
+    path (Linux names are case sensitive: /dev/ttyusb1 is not /dev/ttyUSB1; it had been
+    upper-cased into the same), another host, the same host by another protocol."""
+    win = _unsafe_lab_window(qtbot, tmp_path, "TCPIP0::192.168.1.10::INSTR", "/dev/ttyUSB1")
+    label = win.bench_panel.status_label
+    for n, (generator, stage) in enumerate(
+        [
+            ("TCPIP0::192.168.1.10::INSTR", "/dev/ttyusb1"),
+            ("TCPIP0::192.168.1.11::INSTR", "/dev/ttyUSB1"),
+            ("TCPIP0::192.168.1.10::hislip0::INSTR", "/dev/ttyUSB1"),
+            ("TCPIP0::192.168.1.10::INSTR", "ASRL/dev/ttyUSB1::INSTR"),
+        ]
+    ):
+        assert win.load_bench(_lab_bench(tmp_path / f"other{n}.yaml", generator, stage))
+        connect(qtbot, win)  # read back off: of other instruments
+        assert label.text().startswith("✗ UNSAFE"), (generator, stage)
+        assert any("other instruments than the UNSAFE run's" in s for s in win.log_view.lines[-3:])
+    # and the same instruments, written as the UNSAFE run's file wrote them, take it down
+    assert win.load_bench(
+        _lab_bench(tmp_path / "same.yaml", "TCPIP0::192.168.1.10::INSTR", "/dev/ttyUSB1 ")
+    )
+    connect(qtbot, win)
+    assert not label.text().startswith("✗ UNSAFE")
+
+
+def test_bench_identity_equates_only_spellings_of_one_resource() -> None:
+    """The generator's VISA address and the stage's serial port, by the spellings that
+    certainly open the same resource, and none that might not."""
+    from daq.gui.main_window import _bench_identity
+    from protocols.bench import parse_bench
+
+    def identity(generator: str, stage: str) -> Any:
+        text = LAB.read_text().replace("TCPIP0::192.168.1.10::INSTR", f'"{generator}"')
+        return _bench_identity(parse_bench(text.replace("ASRL4::INSTR ", f'"{stage}"', 1), "b"))
+
+    base = identity("TCPIP0::192.168.1.10::INSTR", "ASRL4::INSTR")
+    for generator, stage in [
+        ("TCPIP::192.168.1.10::INSTR", "asrl4::instr"),
+        ("TCPIP0::192.168.1.10::inst0::INSTR", " ASRL4::INSTR"),
+        ("tcpip::192.168.1.10", "ASRL4::INSTR"),
+        (" TCPIP0::192.168.1.10::INST0::instr\t", "Asrl4::Instr "),
+    ]:
+        assert identity(generator, stage) == base, (generator, stage)
+    for stage in ["COM4", "ASRL4", "ASRL5::INSTR", "ASRL04::INSTR"]:  # pyserial's, or another
+        assert identity("TCPIP0::192.168.1.10::INSTR", stage) != base, stage
+    for generator in [
+        "TCPIP1::192.168.1.10::INSTR",  # another network board
+        "TCPIP0::192.168.1.10::hislip0::INSTR",  # another protocol (maybe, maybe not)
+        "TCPIP0::192.168.1.10::5025::SOCKET",
+        "TCPIP0::192.168.1.10::gpib0,5::INSTR",  # an instrument behind a LAN/GPIB gateway
+        "TCPIP0::lab-awg.local::INSTR",  # a host name: no lookup
+    ]:
+        assert identity(generator, "ASRL4::INSTR") != base, generator
+    com = identity("TCPIP0::192.168.1.10::INSTR", "COM4")
+    assert identity("TCPIP0::192.168.1.10::INSTR", " com4") == com
+    tty = identity("TCPIP0::192.168.1.10::INSTR", "/dev/ttyUSB1")
+    assert identity("TCPIP0::192.168.1.10::INSTR", " /dev/ttyUSB1 ") == tty
+    for other in ["/dev/ttyusb1", "/dev/serial/by-id/usb-FTDI_A1-if00", "ASRL/dev/ttyUSB1::INSTR"]:
+        assert identity("TCPIP0::192.168.1.10::INSTR", other) != tty, other
+    asrl_tty = identity("TCPIP0::192.168.1.10::INSTR", "ASRL/dev/ttyUSB1::INSTR")
+    assert identity("TCPIP0::192.168.1.10::INSTR", "asrl/dev/ttyUSB1::instr") == asrl_tty
+    assert identity("TCPIP0::192.168.1.10::INSTR", "ASRL/dev/ttyusb1::INSTR") != asrl_tty
