@@ -6,7 +6,8 @@ does the work. Nothing here talks to instruments.
 
 from __future__ import annotations
 
-import time
+import datetime as dt
+from collections.abc import Callable
 from typing import Any
 
 from PySide6.QtCore import Qt, QTimer, Signal
@@ -288,18 +289,41 @@ class RunPanel(QGroupBox):
         )
 
 
-class LogView(QPlainTextEdit):
-    """Time-stamped log lines (run events, warnings, errors)."""
+def _local_now() -> dt.datetime:
+    """Now in the local zone, as the window's clock reads (``time.strftime`` did the same)."""
+    return dt.datetime.now().astimezone()
 
-    def __init__(self, parent: QWidget | None = None) -> None:
+
+class LogView(QPlainTextEdit):
+    """Time-stamped log lines (run events, warnings, errors).
+
+    Each line is stamped HH:MM:SS, local time; a heading line names the date ("— 2026-11-28
+    (CET) —") before the first line and again before the first line of each new day (or after
+    a change of the zone's offset, summer time), so a week-long run's log says which day each
+    line is from. ``now`` is the clock (a test injects one)."""
+
+    def __init__(
+        self, parent: QWidget | None = None, now: Callable[[], dt.datetime] = _local_now
+    ) -> None:
         super().__init__(parent)
         self.setReadOnly(True)
         self.setMaximumBlockCount(5000)
+        self._now = now
+        self._day: tuple[dt.date, dt.timedelta | None] | None = None
+        #: the logged lines, one per :meth:`add`, without the date headings (a heading between
+        #: two lines would move what a caller finds at ``lines[-2]`` across midnight)
         self.lines: list[str] = []
 
     def add(self, message: str, level: str = "info") -> None:
-        stamp = time.strftime("%H:%M:%S")
-        line = f"{stamp} {level:7s} {message}"
+        when = self._now()
+        day = (when.date(), when.utcoffset())
+        if day != self._day:
+            self._day = day
+            zone = when.tzname() or when.strftime("UTC%z")
+            self.appendHtml(
+                f'<span style="color:#606060">— {when:%Y-%m-%d} ({_html(zone)}) —</span>'
+            )
+        line = f"{when:%H:%M:%S} {level:7s} {message}"
         self.lines.append(line)
         if level in ("warning", "error"):
             colour = "#b00000" if level == "error" else "#a06000"
