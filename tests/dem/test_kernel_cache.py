@@ -2,20 +2,23 @@
 
 from __future__ import annotations
 
+import hashlib
 import io
 import json
 import os
+import pickle
 import re
 import subprocess
 import sys
 import time
+from importlib.metadata import version
 from pathlib import Path
 
 import pytest
 
 from daq.cli.compile_notice import CompileNotice
 from sim_backend.dem import kernel_cache
-from tests.kernel_index import write_fresh_index
+from tests.kernel_index import numba_cpu_name, write_fresh_index
 
 ROOT = Path(__file__).resolve().parents[2]
 PROBE = "from sim_backend.dem import kernel; print(kernel.run_chunks._cache._cache_path)"
@@ -266,3 +269,75 @@ def test_a_stale_index_is_no_compiled_kernel(
     assert not kernel_cache.kernel_cached_on_disk()  # truncated
     write_fresh_index(index)
     assert kernel_cache.kernel_cached_on_disk()
+
+
+#: a module with one cached numba function, compiled on import (spelt so that
+#: _modules_with_cached_functions does not take this test module for one)
+TINY = """from numba import njit
+
+
+@njit(cache=True)
+def tiny(x):
+    return x + 1
+
+
+tiny(1)
+"""
+
+
+def _index_numba_writes(tmp_path: Path) -> tuple[Path, bytes]:
+    """Compile :data:`TINY` in a process of its own with this environment (its CPU name) into
+    a cache folder under ``tmp_path``: the index numba wrote and the sha256 it stamped it with."""
+    source = tmp_path / "src" / "tiny_cached.py"
+    source.parent.mkdir()
+    source.write_text(TINY, encoding="utf-8")
+    env = {k: v for k, v in os.environ.items() if not k.startswith("NUMBA_CACHE")}
+    env["NUMBA_CACHE_DIR"] = str(tmp_path / "cache")
+    subprocess.run([sys.executable, str(source)], env=env, cwd=tmp_path, capture_output=True,
+                   check=True, timeout=60)  # fmt: skip
+    (index,) = (tmp_path / "cache").rglob("tiny_cached.tiny-*.nbi")
+    return index, hashlib.sha256(source.read_bytes()).digest()
+
+
+@pytest.mark.parametrize(
+    "cpu_env",
+    [
+        None,
+        "generic",
+        pytest.param("", marks=pytest.mark.xfail(strict=True, reason=(
+            "numba keys by '' (config.CPU_NAME is not None), the product by the host CPU"))),
+    ],
+)  # fmt: skip
+def test_the_cpu_of_an_index_numba_wrote_is_the_one_the_product_looks_for(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, cpu_env: str | None
+) -> None:
+    """The product's CPU name against a real index: numba keys each compiled overload by the
+    CPU it compiled for (``$NUMBA_CPU_NAME``, else LLVM's host CPU); a product that names
+    another CPU (or spells it otherwise) announces a compile at every run, or takes another
+    machine's kernel for this one's."""
+    if cpu_env is None:
+        monkeypatch.delenv("NUMBA_CPU_NAME", raising=False)
+    else:
+        monkeypatch.setenv("NUMBA_CPU_NAME", cpu_env)
+    index, stamp = _index_numba_writes(tmp_path)
+    with index.open("rb") as f:
+        numba_version = pickle.load(f)
+        _, overloads = pickle.loads(f.read())
+    written = {key[1][1] for key in overloads}  # key: (signature, magic tuple, hashes)
+    assert written == {numba_cpu_name()}  # the helper's name is numba's
+    cpu = kernel_cache._cpu_name()
+    assert cpu is not None and {cpu.decode()} == written
+    assert numba_version == version("numba")
+    assert kernel_cache._fresh_index(index, stamp, numba_version, cpu)
+    # the helper's index of these sources: numba's key, fresh; for another CPU, not
+    source = (tmp_path / "src" / "tiny_cached.py").read_bytes()
+    mine = tmp_path / "helper" / "tiny_cached.tiny-4.py311.nbi"
+    write_fresh_index(mine, sources=source)
+    with mine.open("rb") as f:
+        pickle.load(f)
+        _, mine_overloads = pickle.loads(f.read())
+    # triple and CPU (the features are those of this process's first codegen)
+    assert {key[1][:2] for key in mine_overloads} == {key[1][:2] for key in overloads}
+    assert kernel_cache._fresh_index(mine, stamp, numba_version, cpu)
+    write_fresh_index(mine, sources=source, cpu="another-cpu")
+    assert not kernel_cache._fresh_index(mine, stamp, numba_version, cpu)
