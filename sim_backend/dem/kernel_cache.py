@@ -210,9 +210,10 @@ def _cpu_name() -> bytes | None:
     """The CPU numba compiles for (``$NUMBA_CPU_NAME``, else LLVM's host CPU, e.g. ``znver5``):
     numba keys a cached kernel by it too, so one compiled on another machine is compiled again
     (a session's machine changed from Zen 3 to Zen 5: its first run estimated 00:00, then
-    compiled). None where llvmlite cannot say."""
+    compiled). None where llvmlite cannot say. As numba's codegen: the variable whenever it is
+    set, even empty (numba then keys by ``''``)."""
     name = os.environ.get("NUMBA_CPU_NAME")
-    if not name:
+    if name is None:
         try:
             from llvmlite import binding
 
@@ -225,7 +226,11 @@ def _cpu_name() -> bytes | None:
 def _fresh_index(nbi: Path, stamp: bytes, numba_version: str, cpu: bytes | None = None) -> bool:
     """Whether numba's index ``nbi`` (a pickled version string, then the pickled ``(source
     stamp, overloads)``, each overload keyed with the CPU it was compiled for) was written by
-    ``numba_version`` for the sources of sha256 ``stamp`` and holds a kernel for ``cpu``."""
+    ``numba_version`` for the sources of sha256 ``stamp`` and holds a kernel for ``cpu``. The
+    CPU is matched as numba keys it, the whole pickled string right after the process's target
+    triple (numba's magic tuple: triple, CPU, features), not as bytes anywhere in the index:
+    ``skylake`` is not ``skylake-avx512``, nor ``x`` a part of ``x86_64``, nor an empty
+    ``$NUMBA_CPU_NAME`` any empty string."""
     import pickle
 
     try:
@@ -235,7 +240,42 @@ def _fresh_index(nbi: Path, stamp: bytes, numba_version: str, cpu: bytes | None 
             data = f.read()
     except Exception:  # unreadable, truncated: numba would recompile too
         return False
-    return stamp in data and (cpu is None or cpu in data)
+    if stamp not in data:
+        return False
+    if cpu is None:
+        return True
+    names = _pickled_str(cpu)
+    triple = _process_triple()
+    if triple is None:
+        return any(name in data for name in names)
+    return any(
+        t + memo + name in data
+        for t in _pickled_str(triple)
+        for memo in (b"\x94", b"")  # pickle's MEMOIZE after the triple (protocol 4 and up)
+        for name in names
+    )
+
+
+def _process_triple() -> bytes | None:
+    """The target triple numba keys a compiled kernel by with its CPU (``x86_64-unknown-linux-
+    gnu``: llvmlite's process triple, as numba's codegen takes it), or None where llvmlite
+    cannot say."""
+    try:
+        from llvmlite import binding
+
+        return str(binding.get_process_triple()).encode()
+    except Exception:
+        return None
+
+
+def _pickled_str(text: bytes) -> tuple[bytes, ...]:
+    """The forms pickle writes the str of UTF-8 ``text`` in (protocols 1-5): SHORT_BINUNICODE
+    (under 256 bytes) and BINUNICODE, each opcode with the length before the bytes."""
+    n = len(text)
+    forms = [b"X" + n.to_bytes(4, "little") + text]
+    if n < 256:
+        forms.append(b"\x8c" + bytes([n]) + text)
+    return tuple(forms)
 
 
 def kernel_loaded() -> bool:

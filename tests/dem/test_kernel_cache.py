@@ -304,10 +304,9 @@ def _index_numba_writes(tmp_path: Path) -> tuple[Path, bytes]:
     [
         None,
         "generic",
-        pytest.param("", marks=pytest.mark.xfail(strict=True, reason=(
-            "numba keys by '' (config.CPU_NAME is not None), the product by the host CPU"))),
+        "",  # numba keys by '' (its config.CPU_NAME is not None); the product had the host's
     ],
-)  # fmt: skip
+)
 def test_the_cpu_of_an_index_numba_wrote_is_the_one_the_product_looks_for(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, cpu_env: str | None
 ) -> None:
@@ -341,3 +340,21 @@ def test_the_cpu_of_an_index_numba_wrote_is_the_one_the_product_looks_for(
     assert kernel_cache._fresh_index(mine, stamp, numba_version, cpu)
     write_fresh_index(mine, sources=source, cpu="another-cpu")
     assert not kernel_cache._fresh_index(mine, stamp, numba_version, cpu)
+
+
+@pytest.mark.parametrize(
+    ("written", "asked"), [("skylake-avx512", "skylake"), ("znver5", "znver"), ("znver5", "x")]
+)
+def test_an_index_for_another_cpu_whose_name_holds_this_ones_is_no_compiled_kernel(
+    tmp_path: Path, written: str, asked: str
+) -> None:
+    """The CPU is matched as a whole name: the check had looked for its bytes anywhere in the
+    index, so a kernel compiled for ``skylake-avx512`` counted as compiled on a ``skylake``
+    (numba would compile, after an estimate without the compile), and ``x`` was found in
+    ``x86_64``."""
+    nbi = tmp_path / "kernel.run_chunks-1.py311.nbi"
+    write_fresh_index(nbi, cpu=written)
+    kernel_py = Path(__file__).resolve().parents[2] / "sim_backend" / "dem" / "kernel.py"
+    stamp = hashlib.sha256(kernel_py.read_bytes()).digest()
+    assert kernel_cache._fresh_index(nbi, stamp, version("numba"), written.encode())
+    assert not kernel_cache._fresh_index(nbi, stamp, version("numba"), asked.encode())
