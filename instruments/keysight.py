@@ -6,6 +6,7 @@ Configuration, as the programming guide orders it (per channel ``n``)::
     SOURn:DATA:VOL:CLE                          clear volatile arb memory
     FORM:BORD SWAP                              binary blocks little-endian (set explicitly)
     SOURn:DATA:ARB:DAC BIAFCn,#<n><len><int16...>   the burst as DAC codes -32767..32767
+    SOURn:DATA:ATTR:POIN? BIAFCn                 the points stored: all of them, or refused
     SOURn:FUNC ARB ; SOURn:FUNC:ARB BIAFCn
     SOURn:FUNC:ARB:FILT NORM                    the flat-band filter between points (default)
     SOURn:FUNC:ARB:SRAT <Sa/s>
@@ -47,7 +48,12 @@ from numpy.typing import NDArray
 from instruments.burst import burst_samples
 from instruments.errors import InstrumentError, InstrumentTimeout, LimitError, ReplyError
 from instruments.interfaces import BurstConfig, Transport
-from instruments.keysight_readback import ChannelReadback, ChannelRequest, read_channel
+from instruments.keysight_readback import (
+    ChannelReadback,
+    ChannelRequest,
+    parse_count,
+    read_channel,
+)
 
 __all__ = [
     "DAC_FULL_SCALE",
@@ -409,6 +415,24 @@ class KeysightGenerator:
             raise ReplyError(f"{name}: configuring channel {n}: " + "; ".join(errs))
         return held
 
+    def _check_points(self, n: int, name: str, sent: int) -> None:
+        """``SOURn:DATA:ATTRibute:POINts? <name>``, "the number of points in the specified
+        arbitrary waveform segment" (33500B programming reference), must be the ``sent`` points:
+        a truncated upload is a :class:`ReplyError` before the arb is selected or armed."""
+        query = f"SOUR{n}:DATA:ATTR:POIN? {name}"
+        raw = self._query(query)
+        try:
+            stored = parse_count(raw)
+        except ValueError:
+            raise ReplyError(
+                f"{self.transport.name}: channel {n}: unreadable {query} reply {raw!r}"
+            ) from None
+        if stored != sent:
+            raise ReplyError(
+                f"{self.transport.name}: channel {n} arb waveform {name}: sent {sent} points, "
+                f"stored {stored}"
+            )
+
     def _write_config(self, n: int, data: bytes, req: ChannelRequest) -> None:
         """The configuration of channel ``n`` as the programming guide orders it; the voltage
         limits go off before the load setting (the instrument refuses a load change while they
@@ -418,6 +442,7 @@ class KeysightGenerator:
         w(f"SOUR{n}:DATA:VOL:CLE")
         w(f"FORM:BORD {req.byte_order}")
         self.transport.write_block(f"SOUR{n}:DATA:ARB:DAC {req.arb_name},", data)
+        self._check_points(n, req.arb_name, len(data) // 2)
         w(f"SOUR{n}:FUNC {req.function}")
         w(f"SOUR{n}:FUNC:ARB {req.arb_name}")
         # the filter first: left OFF, it caps the rate at 62.5 MSa/s (33500) and would clip SRAT

@@ -6,7 +6,8 @@ burst and trigger settings). Hooks: :attr:`trigger_hooks` (called with the tuple
 that fire on ``*TRG``), :attr:`responsive` (False: stops answering), :meth:`push_error`,
 :attr:`late_replies` (the next n query replies miss their timeout and arrive just before the
 following reply, as from an instrument that stalled), :meth:`clear` (device clear: the output
-queue, late replies included, is dropped; the error queue is kept, as IEEE 488.2 says).
+queue, late replies included, is dropped; the error queue is kept, as IEEE 488.2 says),
+:attr:`stored_points` (an upload keeps only its first n points, silently: a truncated transfer).
 The arbitrary waveform of ``n`` points is played in ``n / SRAT`` s (point ``k`` at ``k / SRAT``).
 
 Queries answer as the 33500 Series Operating and Service Guide gives them ("Typical Return"):
@@ -29,6 +30,13 @@ Z) is clipped to the nearest allowed value and -222 "Data out of range" is queue
 and offset are kept to :attr:`KeysightEmulator.volt_digits` significant digits and the arb
 sample rate to :attr:`KeysightEmulator.srat_digits`, silently. The digit counts are stand-ins
 for the instrument's resolution (the guide states no step), so a test can make them coarse.
+
+``DATA:ATTRibute:POINts? [<arb name>]``: "Returns the number of points in the specified arbitrary
+waveform segment in INTERNAL or USB memory, or loaded into waveform memory" (the 33500B
+programming reference); here the points stored under that name in the channel's volatile
+memory, as an NR1 integer (``+1024``; the reply's exact form is not confirmed on an instrument),
+the channel's selected arb without a name. An unknown name is refused as ``FUNC:ARB`` refuses it
+(-224; the guide's error list gives no code of its own that was found).
 """
 
 from __future__ import annotations
@@ -166,6 +174,8 @@ class KeysightEmulator:
         self.n_triggers = 0
         self.commands: list[str] = []
         self.late_replies = 0
+        #: fault injection: each ``DATA:ARB:DAC`` upload keeps only its first n points (None: all)
+        self.stored_points: int | None = None
         self._held: list[str] = []
 
     # --- hooks for the world ------------------------------------------------------------
@@ -302,6 +312,13 @@ class KeysightEmulator:
         if key == "DATA:ARB:DAC":
             self._arb_dac(n, arg, block)
             return None
+        if key == "DATA:ATTR:POIN" and query:
+            name = arg.strip().strip('"').upper()
+            if not name:
+                return f"{ch.waveform.size:+d}"
+            if name not in self.volatile[n]:
+                raise ScpiError(-224, "Illegal parameter value;waveform not in volatile memory")
+            return f"{self.volatile[n][name].size:+d}"
         if key == "FUNC":
             if query:
                 return ch.function
@@ -502,7 +519,7 @@ class KeysightEmulator:
         codes = np.frombuffer(block, dtype=dtype).astype(np.float64)
         if np.any(np.abs(codes) > 32767):
             raise ScpiError(-222, "Data out of range")
-        self.volatile[n][name] = codes / 32767.0
+        self.volatile[n][name] = codes[: self.stored_points] / 32767.0
 
     @staticmethod
     def _number(arg: str) -> float:

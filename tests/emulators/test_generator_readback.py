@@ -7,9 +7,10 @@ from __future__ import annotations
 import dataclasses
 import math
 
+import numpy as np
 import pytest
 
-from instruments.burst import Burst
+from instruments.burst import Burst, burst_samples
 from instruments.errors import ReplyError
 from instruments.interfaces import BurstConfig
 from instruments.keysight import GeneratorLimits, KeysightGenerator
@@ -136,3 +137,51 @@ def test_clearing_the_volatile_memory_reloads_the_default_arb() -> None:
     assert q("SYST:ERR?").startswith("-224,")
     gen.configure_burst(1, burst(2.0))  # the driver's own order uploads it again
     assert (emu.channels[1].waveform == played).all() and gen.errors() == []
+
+
+def test_the_emulator_answers_the_points_stored_under_an_arb_name() -> None:
+    """DATA:ATTRibute:POINts? "Returns the number of points in the specified arbitrary waveform
+    segment" (33500B programming reference): the points stored under that name, the selected
+    arb's without one; an unknown name is refused as FUNC:ARB refuses it."""
+    emu = KeysightEmulator()
+    t = on(emu).transport
+    t.write("FORM:BORD SWAP")
+    t.write_block("SOUR2:DATA:ARB:DAC RAMP16,", np.arange(16, dtype="<i2").tobytes())
+    assert t.query("SOUR2:DATA:ATTR:POIN? RAMP16") == "+16"
+    assert t.query('SOUR2:DATA:ATTRibute:POINts? "ramp16"') == "+16"
+    assert t.query("SOUR2:DATA:ATTR:POIN?") == f"{emu.channels[2].waveform.size:+d}"
+    t.write("SOUR1:DATA:ATTR:POIN? RAMP16")  # channel 1's memory does not hold it
+    assert t.query("SYST:ERR?").startswith("-224,")
+
+
+def test_the_strict_emulator_holds_every_point_of_the_upload() -> None:
+    """The points stored are read back after the upload (none was read: a truncated upload
+    would have played a wrong burst); on the strict emulator a normal upload passes."""
+    emu = KeysightEmulator(strict=True)
+    gen = on(emu)
+    gen.configure_burst(1, burst(2.0))
+    stored = emu.volatile[1]["BIAFC1"].size
+    i = emu.commands.index("SOUR1:DATA:ATTR:POIN? BIAFC1")
+    assert emu.commands[i - 1].startswith("SOUR1:DATA:ARB:DAC BIAFC1,")
+    assert stored == emu.channels[1].waveform.size and gen.errors() == []
+
+
+def test_a_truncated_upload_is_refused_before_any_burst_is_armed() -> None:
+    """An upload the generator stored short (here its first 100 points) is one line naming the
+    waveform, the points sent and the points stored; nothing after it is sent but the safe
+    state, so no burst is selected, armed or played."""
+    emu = KeysightEmulator(strict=True)
+    emu.stored_points = 100
+    gen = on(emu)
+    with pytest.raises(ReplyError) as info:
+        gen.configure_burst(1, burst(2.0))
+    i = emu.commands.index("SOUR1:DATA:ATTR:POIN? BIAFC1")
+    n = burst_samples(burst(2.0).shape, burst(2.0).sample_rate_Hz).size
+    assert str(info.value) == (
+        f"generator (simulated): channel 1 arb waveform BIAFC1: sent {n} points, stored 100"
+    )
+    after = emu.commands[i + 1 :]
+    assert not any("FUNC" in c or "BURS" in c or "TRG" in c for c in after), after
+    ch = emu.channels[1]
+    assert ch.function != "ARB" and not ch.burst_on and not ch.output_on
+    assert gen.held(1) is None and emu.n_triggers == 0

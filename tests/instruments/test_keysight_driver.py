@@ -67,6 +67,7 @@ def config_script(ch: int, n_bytes: int) -> list[tuple[str, str | BaseException 
         (f"SOUR{ch}:DATA:VOL:CLE", None),
         ("FORM:BORD SWAP", None),
         (f"SOUR{ch}:DATA:ARB:DAC BIAFC{ch},{head}<{n_bytes} bytes>", None),
+        (f"SOUR{ch}:DATA:ATTR:POIN? BIAFC{ch}", f"+{n_bytes // 2}"),
         (f"SOUR{ch}:FUNC ARB", None),
         (f"SOUR{ch}:FUNC:ARB BIAFC{ch}", None),
         (f"SOUR{ch}:FUNC:ARB:FILT NORM", None),
