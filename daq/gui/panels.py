@@ -327,7 +327,9 @@ class LogView(QPlainTextEdit):
         self.lines.append(line)
         if level in ("warning", "error"):
             colour = "#b00000" if level == "error" else "#a06000"
-            self.appendHtml(f'<span style="color:{colour}">{_html(line)}</span>')
+            # white-space:pre: rich text would collapse the padding after the level
+            style = f"color:{colour}; white-space:pre"
+            self.appendHtml(f'<span style="{style}">{_html(line)}</span>')
         else:
             self.appendPlainText(line)
 

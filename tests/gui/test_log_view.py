@@ -53,3 +53,25 @@ def test_a_line_after_midnight_is_preceded_by_the_new_date(qtbot: Any) -> None:
         "— 2026-11-28 (CET) —",
         "00:00:03 warning point 19 done",
     ]
+
+
+def test_warnings_and_errors_keep_their_spaces(qtbot: Any) -> None:
+    """A warning or an error is drawn in colour (rich text), where runs of spaces collapse:
+    "00:00:03 error   cannot read the stage" was shown as "00:00:03 error cannot read the
+    stage", its message closer to the stamp than the other lines' (and a message's own double
+    spaces were lost)."""
+    clock = Clock(dt.datetime(2026, 11, 28, 0, 0, 3, tzinfo=CET))
+    view = LogView(now=clock)
+    qtbot.addWidget(view)
+    view.add("point 19 done")
+    view.add("cannot read the stage", "error")
+    view.add("stage  slow", "warning")
+    assert (
+        view.toPlainText().splitlines()[1:]
+        == view.lines
+        == [
+            "00:00:03 info    point 19 done",
+            "00:00:03 error   cannot read the stage",
+            "00:00:03 warning stage  slow",
+        ]
+    )
