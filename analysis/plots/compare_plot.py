@@ -11,6 +11,7 @@ from matplotlib.figure import Figure
 from analysis.compare import Comparison, DirectionComparison
 from analysis.plots.quasi_bands import DIRECTION_COLOURS
 from analysis.plots.style import (
+    VERDICT_KINDS,
     add_gap_background,
     amplitude_label,
     amplitude_scale,
@@ -19,10 +20,12 @@ from analysis.plots.style import (
     masked_cmap,
     new_figure,
     on_every_cylinder,
+    plot_by_verdict,
     style,
 )
 from analysis.spatial import SpatialFrequencyMap
 from analysis.spectra import spectrum_db
+from analysis.summary import summary_rows
 
 __all__ = [
     "plot_compare_residuals",
@@ -143,6 +146,12 @@ def plot_compare_sweep(cmp: Comparison) -> Figure:
     amplitude, both directions: measured markers, model lines; amplitudes whose entry or far
     point is failed, clipped or not measured get the state's marker instead.
 
+    The peaks, measured (circles) and model (squares on its line), are drawn as the regime
+    figure draws them, by the verdict of :func:`analysis.summary.conversion_verdict` on their
+    own sweep (:func:`analysis.summary.summary_rows`): filled where it converted, hollow in the
+    direction's colour where undetermined, hollow grey where not; before, every peak was a
+    filled dot, and a line that had not converted could not be told from one that had.
+
     The transmission is the far end's signal, as the regime figure's: where the measured far
     record's noise is known, its energy in the band where the signal can be less the noise's
     there (``signal_transmission``), and the model's in the same band
@@ -170,11 +179,18 @@ def plot_compare_sweep(cmp: Comparison) -> Figure:
                 ax_t.plot(x[floor], ms.transmission_bound[floor], "v", color=colour, mfc="none",
                           ms=8, ls="none",
                           label=f"{d.upper()} at the noise floor (at most)")  # fmt: skip
-            ax_f.plot(x, ps.output_Hz / 1e3, ".-", color=colour, lw=1.2, ms=4,
-                      label=f"{d.upper()} model")  # fmt: skip
-            ax_f.plot(
-                x[good], ms.output_Hz[good] / 1e3, "o", color=colour, label=f"{d.upper()} measured"
-            )
+            # the far-end peak in the regime figure's verdict language (plots.style): filled
+            # where the summary's verdict is a conversion, hollow in colour where the run
+            # cannot tell, hollow grey where not; the model's sweep judged by the same rule
+            ax_f.plot(x, ps.output_Hz / 1e3, "-", color=colour, lw=1.2)
+            for series, sw, sel, marker, size in (
+                ("model", ps, np.ones(x.size, dtype=bool), "s", 5),
+                ("measured", ms, good, "o", 7),
+            ):
+                verdicts = np.array([r["conversion"] for r in summary_rows(sw)], dtype=object)
+                labels = {k: f"{d.upper()} {series}, {k}" for k in VERDICT_KINDS}
+                plot_by_verdict(ax_f, x[sel], sw.output_Hz[sel] / 1e3, verdicts[sel], marker,
+                                colour, labels, ms=size)  # fmt: skip
             for name, (marker, mc) in BAD_MARK.items():  # unscanned: nothing to mark
                 sel = st == name
                 if np.any(sel):

@@ -28,8 +28,15 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from analysis.plots.quasi_bands import DIRECTION_COLOURS
-from analysis.plots.style import MISSING_AT, amplitude_scale, mark_missing, new_figure, style
-from analysis.summary import is_conversion, summary_rows
+from analysis.plots.style import (
+    MISSING_AT,
+    amplitude_scale,
+    mark_missing,
+    new_figure,
+    plot_by_verdict,
+    style,
+)
+from analysis.summary import summary_rows
 from analysis.sweep import AmplitudeSweep
 
 __all__ = ["plot_regime", "rms_ratio"]
@@ -89,25 +96,19 @@ def plot_regime(sweeps: Mapping[str, AmplitudeSweep]) -> Figure:
                              label=f"{d.upper()} linear floor {'at most ' if bound else ''}"
                              f"{floor:.2g}")  # fmt: skip
             fo = np.isfinite(sw.output_Hz) & (amps > 0)
-            verdicts = [r["conversion"] for r in summary_rows(sw)]
-            conv = fo & np.array([is_conversion(v) for v in verdicts])
-            # the run cannot tell (a lower-bound gain): neither converted nor not (a reviewer:
-            # it was drawn "not converted")
-            unsure = fo & np.array([v == "undetermined" for v in verdicts])
+            verdicts = np.array([r["conversion"] for r in summary_rows(sw)], dtype=object)
+            # the run cannot tell ("undetermined": a lower-bound gain) is neither converted nor
+            # not (a reviewer: it was drawn "not converted"); the styles: plots.style
             marker = MARKERS.get(d, "o-")[0]
             ax_f.plot(amps[fo], sw.output_Hz[fo] / 1e3, "-", color=colour, lw=1, alpha=0.5)
-            if conv.any():
-                ax_f.plot(amps[conv], sw.output_Hz[conv] / 1e3, marker, color=colour, ls="none",
-                          label=f"{d.upper()} far-end peak, converted")  # fmt: skip
-            if unsure.any():
-                ax_f.plot(amps[unsure], sw.output_Hz[unsure] / 1e3, marker, mfc="none",
-                          mec=colour, ls="none",
-                          label=f"{d.upper()} far-end peak, undetermined")  # fmt: skip
-            if (fo & ~conv & ~unsure).any():
-                rest = fo & ~conv & ~unsure
-                ax_f.plot(amps[rest], sw.output_Hz[rest] / 1e3, marker, mfc="none",
-                          mec="grey", ls="none",
-                          label=f"{d.upper()} largest far-end line, not converted")  # fmt: skip
+            peak = f"{d.upper()} far-end peak"
+            labels = {
+                "converted": f"{peak}, converted",
+                "undetermined": f"{peak}, undetermined",
+                "not converted": f"{d.upper()} largest far-end line, not converted",
+            }
+            y = sw.output_Hz[fo] / 1e3
+            plot_by_verdict(ax_f, amps[fo], y, verdicts[fo], marker, colour, labels)
         ax_t.set_xscale("log")
         ax_t.set_yscale("log")
         ax_t.set_ylabel("far/near rms ratio")

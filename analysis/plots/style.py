@@ -28,6 +28,7 @@ __all__ = [
     "FORMATS",
     "GAP_LABEL",
     "RC",
+    "VERDICT_KINDS",
     "add_gap_background",
     "amplitude_label",
     "amplitude_scale",
@@ -35,8 +36,11 @@ __all__ = [
     "gap_legend_handle",
     "masked_cmap",
     "new_figure",
+    "plot_by_verdict",
     "save_figure",
     "style",
+    "verdict_kind",
+    "verdict_marker",
 ]
 
 #: formats every figure is written in
@@ -194,6 +198,51 @@ def mark_missing(
         xs, ys = edge, pos
     ax.plot(xs, ys, marker, color=colour, ms=8, mew=2, ls="none", transform=tr,
             clip_on=False, zorder=6, label=label)  # fmt: skip
+
+
+#: how a far-end line's conversion verdict (:func:`analysis.summary.conversion_verdict`, through
+#: :func:`analysis.summary.summary_rows`) is drawn, in drawing order: filled in its colour where
+#: it converted, hollow in its colour where the run cannot tell, hollow grey where it did not
+VERDICT_KINDS = ("converted", "undetermined", "not converted")
+
+
+def verdict_kind(verdict: str) -> str:
+    """Which of :data:`VERDICT_KINDS` a summary row's ``conversion`` verdict is drawn as."""
+    from analysis.summary import is_conversion
+
+    if is_conversion(verdict):
+        return "converted"
+    return "undetermined" if verdict == "undetermined" else "not converted"
+
+
+def verdict_marker(kind: str, colour: str) -> dict[str, Any]:
+    """The marker keywords of a point of verdict ``kind`` (one of :data:`VERDICT_KINDS`) in a
+    series drawn in ``colour``: the regime figure's and ``biafc compare``'s far-end peaks."""
+    if kind == "converted":
+        return {"color": colour}
+    edge = colour if kind == "undetermined" else "grey"
+    return {"color": edge, "mfc": "none", "mec": edge}
+
+
+def plot_by_verdict(
+    ax: Axes,
+    x: NDArray[Any],
+    y: NDArray[Any],
+    verdicts: Sequence[str] | NDArray[Any],
+    marker: str,
+    colour: str,
+    labels: dict[str, str],
+    **kwargs: Any,
+) -> None:
+    """Points ``(x, y)`` styled by their ``verdicts`` (:func:`verdict_marker`), one artist per
+    kind present, labelled ``labels[kind]``; NaN ``y`` are left out."""
+    kinds = np.array([verdict_kind(str(v)) for v in verdicts], dtype=object)
+    finite = np.isfinite(np.asarray(y, dtype=np.float64))
+    for kind in VERDICT_KINDS:
+        sel = finite & (kinds == kind)
+        if sel.any():
+            ax.plot(x[sel], y[sel], marker, ls="none", label=labels[kind],
+                    **verdict_marker(kind, colour), **kwargs)  # fmt: skip
 
 
 def on_every_cylinder(

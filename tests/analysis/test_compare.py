@@ -381,3 +381,41 @@ def test_far_records_at_the_noise_floor_are_bounds_not_compared(tmp_path: Path) 
             (~ms.at_noise_floor & (dc.sweep_state() == "ok")).sum()
         )
     plt.close(fig)
+
+
+def test_the_far_end_peaks_say_whether_they_converted(scan: Path) -> None:
+    """The far-end peak panel drew every peak, measured and model, as the same filled dot:
+    a 20 nm line that had not converted could not be told from a 2 um conversion. It speaks
+    the regime figure's language now (the summary's verdict): filled where converted, hollow
+    grey where not, and its legend names the styles."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import same_color
+
+    from analysis.plots.compare_plot import plot_compare_sweep
+    from analysis.plots.quasi_bands import DIRECTION_COLOURS
+    from analysis.summary import summary_rows
+
+    cmp = compare_run(read_run(scan), None).comparison
+    fig = plot_compare_sweep(cmp)
+    ax_f = fig.axes[1]
+    named = {str(ln.get_label()): ln for ln in ax_f.lines}
+    legend = [t.get_text() for t in ax_f.get_legend().get_texts()]
+    for d, dc in cmp.directions.items():
+        colour = DIRECTION_COLOURS[d]
+        for series, sw in (("measured", dc.measured_sweep), ("model", dc.predicted_sweep)):
+            # the summary's verdicts: 20 nm passes nothing, 2 um converts
+            verdicts = [r["conversion"] for r in summary_rows(sw)]
+            assert verdicts[0] == "none" and verdicts[1] in ("down", "up"), (d, series)
+            full = named[f"{d.upper()} {series}, converted"]
+            hollow = named[f"{d.upper()} {series}, not converted"]
+            assert np.allclose(full.get_xdata(), [2.0]) and np.allclose(hollow.get_xdata(), [0.02])
+            assert np.allclose(full.get_ydata(), sw.output_Hz[1:] / 1e3)  # the same numbers
+            assert np.allclose(hollow.get_ydata(), sw.output_Hz[:1] / 1e3)
+            assert same_color(full.get_markerfacecolor(), colour)
+            assert hollow.get_markerfacecolor() == "none"
+            assert same_color(hollow.get_markeredgecolor(), "grey")
+            assert {f"{d.upper()} {series}, converted", str(hollow.get_label())} <= set(legend)
+    plt.close(fig)
