@@ -25,6 +25,7 @@ from pathlib import Path
 
 from daq.cli.biafc import CliError
 from daq.cli.out_check import can_write, can_write_folder
+from daq.cli.written import print_written
 
 __all__ = ["add_arguments", "run"]
 
@@ -163,11 +164,7 @@ def _check(data, spec, result, figures: Path | None, say=None) -> dict[str, floa
         flush=True,
     )
     if figures is not None:
-
-        def written(name: str, paths: list[Path]) -> None:
-            print(f"written {name}: {', '.join(str(p) for p in paths)}", flush=True)
-
-        write_compare(after_report, data, figures / "compare_after", written)
+        write_compare(after_report, data, figures / "compare_after", print_written)
         print(f"written {after_report.csv_path}")
         print(f"written {after_report.json_path}")
     return {
@@ -185,4 +182,4 @@ def _figures(data, spec, result, folder: Path) -> None:  # type: ignore[no-untyp
     from analysis.plots.style import save_figure
 
     paths = save_figure(plot_calibration(fit_spectra(data, result, spec)), folder, "calibration")
-    print(f"written calibration: {', '.join(str(p) for p in paths)}")
+    print_written("calibration", paths)

@@ -17,6 +17,7 @@ from pathlib import Path
 
 from daq.cli.biafc import CliError
 from daq.cli.out_check import can_write_folder
+from daq.cli.written import print_written
 
 __all__ = ["add_arguments", "parse_stroke", "run"]
 
@@ -62,9 +63,6 @@ def run(args: argparse.Namespace) -> int:
     def text(table: str) -> None:
         print(table, flush=True)
 
-    def written(name: str, paths: list[Path]) -> None:
-        print(f"written {name}: {', '.join(str(p) for p in paths)}", flush=True)
-
     try:
         report = compare_run(
             data,
@@ -73,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
             piezo_stroke_m_per_V=stroke,
             solver="linear" if args.linear else "dem",
             on_text=text,
-            on_written=written,
+            on_written=print_written,
         )
     except ValueError as exc:
         raise CliError(f"{path}: {exc}") from exc

@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING
 
 from daq.cli.biafc import CliError
 from daq.cli.out_check import can_write_folder
+from daq.cli.written import print_written
 
 if TYPE_CHECKING:
     from protocols.studyfile import StudyData
@@ -191,11 +192,8 @@ def run(args: argparse.Namespace) -> int:
     def summary(text: str) -> None:
         print(text, flush=True)
 
-    def written(name: str, paths: list[Path]) -> None:
-        print(f"written {name}: {', '.join(str(p) for p in paths)}", flush=True)
-
     try:
-        report = write_figures(data, out, on_summary=summary, on_written=written)
+        report = write_figures(data, out, on_summary=summary, on_written=print_written)
     except ValueError as exc:
         raise CliError(f"{path}: {exc}") from exc
     print(f"written {report.summary_path}")
