@@ -23,6 +23,7 @@ first run.
 
 from __future__ import annotations
 
+import functools
 import os
 import re
 import sys
@@ -256,10 +257,11 @@ def _fresh_index(nbi: Path, stamp: bytes, numba_version: str, cpu: bytes | None 
     )
 
 
+@functools.cache
 def _process_triple() -> bytes | None:
     """The target triple numba keys a compiled kernel by with its CPU (``x86_64-unknown-linux-
     gnu``: llvmlite's process triple, as numba's codegen takes it), or None where llvmlite
-    cannot say."""
+    cannot say; the process's own, asked once (:func:`_fresh_index` asks it per index file)."""
     try:
         from llvmlite import binding
 
