@@ -140,11 +140,16 @@ def test_unsafe_goes_only_with_a_read_back_of_the_same_instruments(
 LAB = Path(__file__).resolve().parents[2] / "protocols" / "benches" / "lab_bench.yaml"
 
 
-def _lab_bench(path: Path, generator: str, stage: str) -> Path:
+def _lab_text(generator: str, stage: str) -> str:
     """The lab bench template with the generator and the stage at these addresses (written
     quoted: a YAML plain scalar would lose the spaces around them)."""
     text = LAB.read_text().replace("TCPIP0::192.168.1.10::INSTR", f'"{generator}"')
-    path.write_text(text.replace("ASRL4::INSTR ", f'"{stage}"', 1))
+    return text.replace("ASRL4::INSTR ", f'"{stage}"', 1)
+
+
+def _lab_bench(path: Path, generator: str, stage: str) -> Path:
+    """:func:`_lab_text` written to ``path``."""
+    path.write_text(_lab_text(generator, stage))
     return path
 
 
@@ -223,8 +228,7 @@ def test_bench_identity_equates_only_spellings_of_one_resource() -> None:
     from protocols.bench import parse_bench
 
     def identity(generator: str, stage: str) -> Any:
-        text = LAB.read_text().replace("TCPIP0::192.168.1.10::INSTR", f'"{generator}"')
-        return _bench_identity(parse_bench(text.replace("ASRL4::INSTR ", f'"{stage}"', 1), "b"))
+        return _bench_identity(parse_bench(_lab_text(generator, stage), "b"))
 
     base = identity("TCPIP0::192.168.1.10::INSTR", "ASRL4::INSTR")
     for generator, stage in [
